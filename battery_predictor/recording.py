@@ -1,0 +1,80 @@
+"""A measured (or emulated) pack recording: the one data type every command consumes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from battery_predictor.errors import InputDataError
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Time series of one discharge (or any load) of a pack or cell.
+
+    Attributes
+    ----------
+    time_s : numpy.ndarray
+        Sample times in s, strictly increasing, starting anywhere.
+    voltage_v : numpy.ndarray
+        Terminal voltage in V.
+    current_a : numpy.ndarray
+        Current in A, **positive while discharging** (PyBaMM convention).
+    temperature_k : numpy.ndarray or None
+        Temperature in K (ambient or cell surface), or None when not measured.
+    source : str
+        Where it came from (file path), used in error messages.
+    metadata : dict
+        Free-form metadata (pack id, seed, ground truth...).
+    """
+
+    time_s: np.ndarray
+    voltage_v: np.ndarray
+    current_a: np.ndarray
+    temperature_k: np.ndarray | None = None
+    source: str = "<memory>"
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = len(self.time_s)
+        for name in ("voltage_v", "current_a"):
+            if len(getattr(self, name)) != n:
+                raise InputDataError(f"{self.source}: column {name} has {len(getattr(self, name))} rows, time_s has {n}")
+        if self.temperature_k is not None and len(self.temperature_k) != n:
+            raise InputDataError(f"{self.source}: column temperature has {len(self.temperature_k)} rows, time_s has {n}")
+
+    @property
+    def duration_s(self) -> float:
+        """Duration of the recording in s."""
+        return float(self.time_s[-1] - self.time_s[0]) if len(self.time_s) else 0.0
+
+    @property
+    def relative_time_s(self) -> np.ndarray:
+        """Time in s from the first sample."""
+        return self.time_s - self.time_s[0]
+
+    def charge_drawn_ah(self) -> float:
+        """Charge drawn over the recording in Ah (trapezoidal, discharge positive)."""
+        if len(self.time_s) < 2:
+            return 0.0
+        return float(np.trapezoid(self.current_a, self.time_s) / 3600.0) if hasattr(np, "trapezoid") else float(np.trapz(self.current_a, self.time_s) / 3600.0)
+
+    def mean_temperature_k(self, default_k: float = 298.15) -> float:
+        """Mean temperature in K, or ``default_k`` when not measured."""
+        if self.temperature_k is None or not np.isfinite(self.temperature_k).any():
+            return float(default_k)
+        return float(np.nanmean(self.temperature_k))
+
+    def slice_time(self, start_s: float, end_s: float) -> "Recording":
+        """Samples with ``start_s <= time_s <= end_s`` (absolute times)."""
+        mask = (self.time_s >= start_s) & (self.time_s <= end_s)
+        return Recording(
+            time_s=self.time_s[mask],
+            voltage_v=self.voltage_v[mask],
+            current_a=self.current_a[mask],
+            temperature_k=None if self.temperature_k is None else self.temperature_k[mask],
+            source=self.source,
+            metadata=dict(self.metadata),
+        )
