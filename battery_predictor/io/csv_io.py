@@ -1,0 +1,648 @@
+"""Read and write measurement CSV files as :class:`~battery_predictor.recording.Recording`.
+
+File format
+-----------
+A UTF-8 text file (a byte-order mark is accepted) with one header line and one
+sample per line, comma separated. Lines starting with ``#`` *before* the header
+are skipped. Columns may come in any order; unknown columns are ignored.
+
+Required columns:
+
+``time_s``
+    Sample time in s, strictly increasing.
+``voltage_V``
+    Terminal voltage in V.
+``current_A``
+    Current in A, **positive while discharging** (the package-wide convention,
+    see :mod:`battery_predictor.conventions`).
+
+Temperature (optional). Unless ``temperature_column=`` names one explicitly, the
+first column of :data:`TEMPERATURE_COLUMNS` that exists is used. Only these
+exact names are recognised (cell/case/surface first, ambient/chamber last);
+other ``*_C`` columns such as ``temperature_pos_C`` (tab sensors) or
+``group1_voltage_V`` are ignored on purpose. Columns ending in ``_C`` are read
+as °C, columns ending in ``_K`` as K. A temperature column that is empty on
+every row gives ``temperature_k=None``.
+
+Checks
+------
+Every problem raises :class:`~battery_predictor.errors.InputDataError` with a
+one-line message that names the file and either the column or the **CSV line
+number** (the header is line 1; the data row number, counting the first data
+line as row 1, is given in parentheses):
+
+* file missing, a directory, not UTF-8, empty, or header without data rows;
+* a required column missing (the message lists the columns found);
+* a non-numeric cell;
+* an empty/NaN/inf cell in ``time_s``, ``voltage_V`` or ``current_A``
+  or a voltage <= 0 V (``drop_nan=True`` drops those rows instead) or a gap in the temperature
+  column (``drop_nan=True`` fills it from the nearest measured sample in
+  time instead, so that a missing auxiliary reading never discards a V/I
+  sample);
+* ``time_s`` not strictly increasing: the first offending line and both times
+  are named. Repeated timestamps at step changes are common in cycler exports;
+  ``duplicate_times="keep_last"`` (recommended: the later row is the start of
+  the new step, which keeps the zero-order-hold current correct) or
+  ``"keep_first"`` resolves them. Times that go backwards are always an error;
+* voltages that look like millivolts (median > :data:`MAX_PLAUSIBLE_VOLTAGE_V`),
+  currents that look like milliamperes (median of the non-zero ``|current_A|``
+  > :data:`MAX_PLAUSIBLE_CURRENT_A`), implausible temperatures (kelvin in a ``_C`` column or vice versa);
+* the wrong current sign convention, see :func:`check_current_sign`.
+
+Long-format files that hold several records (for example one pulse test per
+``soc_label``/``cell``) are read with :func:`load_csv_groups`.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from battery_predictor.conventions import celsius_to_kelvin, kelvin_to_celsius
+from battery_predictor.errors import InputDataError
+from battery_predictor.recording import Recording
+
+#: Columns every measurement CSV must have.
+REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "voltage_V", "current_A")
+
+#: Temperature columns recognised automatically, in order of preference.
+#: ``*_C`` columns are °C, ``*_K`` columns are K.
+TEMPERATURE_COLUMNS: tuple[str, ...] = (
+    "temperature_C",
+    "temperature_K",
+    "cell_temperature_C",
+    "surface_temperature_C",
+    "case_temperature_C",
+    "pack_temperature_C",
+    "battery_temperature_C",
+    "temperature1_C",
+    "ambient_temperature_C",
+    "chamber_temperature_C",
+)
+
+#: Robot packs stay below this; a larger median voltage means millivolts.
+MAX_PLAUSIBLE_VOLTAGE_V = 100.0
+#: A larger median of the non-zero |current| means milliamperes.
+MAX_PLAUSIBLE_CURRENT_A = 1000.0
+#: Plausible range of a measured cell/ambient temperature in °C.
+PLAUSIBLE_TEMPERATURE_RANGE_C = (-60.0, 150.0)
+
+DUPLICATE_TIME_POLICIES = ("error", "keep_first", "keep_last")
+
+_MISSING_STRINGS = frozenset({"", "nan", "na", "n/a", "null", "none"})
+_MAX_HINT_COLUMNS = 20
+
+
+# ---------------------------------------------------------------------------
+# Reading the raw table
+# ---------------------------------------------------------------------------
+
+
+class _Table:
+    """Raw CSV content: stripped header names, string rows and their line numbers."""
+
+    def __init__(self, path: Path, header: list[str], rows: list[list[str]], lines: list[int]):
+        self.path = path
+        self.header = header
+        self.rows = rows
+        self.lines = lines
+        self.index = {name: i for i, name in enumerate(header)}
+
+    def column(self, name: str) -> list[str]:
+        j = self.index[name]
+        return [row[j] if j < len(row) else "" for row in self.rows]
+
+
+def _read_table(path: Path) -> _Table:
+    if not path.exists():
+        raise InputDataError(f"{path}: file not found")
+    if path.is_dir():
+        raise InputDataError(f"{path}: is a directory, expected a CSV file")
+    header: list[str] | None = None
+    header_line = 0
+    rows: list[list[str]] = []
+    lines: list[int] = []
+    try:
+        with path.open("r", encoding="utf-8-sig", newline="") as fh:
+            reader = csv.reader(fh)
+            for row in reader:
+                if header is None:
+                    if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
+                        continue
+                    header = [name.strip() for name in row]
+                    header_line = reader.line_num
+                    continue
+                rows.append(row)
+                lines.append(reader.line_num)
+    except UnicodeDecodeError as exc:
+        raise InputDataError(f"{path}: not a UTF-8 text CSV file ({exc.reason} at byte {exc.start})") from None
+    except csv.Error as exc:
+        raise InputDataError(f"{path}: line {reader.line_num}: malformed CSV ({exc})") from None
+    except OSError as exc:
+        raise InputDataError(f"{path}: cannot read file ({exc.strerror or exc})") from None
+    if header is None:
+        raise InputDataError(f"{path}: file is empty (no header line)")
+    # Trailing blank lines are harmless; blank lines in between are empty rows.
+    while rows and not "".join(rows[-1]).strip():
+        rows.pop()
+        lines.pop()
+    if not rows:
+        raise InputDataError(f"{path}: line {header_line}: has a header but no data rows")
+    seen: set[str] = set()
+    for name in header:
+        if name in seen:
+            raise InputDataError(f"{path}: line {header_line}: column {name!r} appears more than once in the header")
+        seen.add(name)
+    for k, (row, line) in enumerate(zip(rows, lines)):
+        if len(row) > len(header) and "".join(row[len(header):]).strip():
+            raise InputDataError(
+                f"{path}: line {line} (data row {k + 1}): has {len(row)} fields, the header has {len(header)}"
+            )
+    return _Table(path, header, rows, lines)
+
+
+def _where(table: _Table, k: int, row_numbers: Sequence[int] | None = None) -> str:
+    """'line N (data row M)' for row index k of the (possibly filtered) table."""
+    row = row_numbers[k] if row_numbers is not None else k + 1
+    return f"line {table.lines[row - 1]} (data row {row})"
+
+
+def _find_columns(table: _Table, temperature_column: str | None) -> tuple[str | None, str]:
+    missing = [c for c in REQUIRED_COLUMNS if c not in table.index]
+    if missing:
+        found = table.header[:_MAX_HINT_COLUMNS]
+        more = f" (+{len(table.header) - len(found)} more)" if len(table.header) > len(found) else ""
+        hint = ""
+        if len(table.header) == 1 and (";" in table.header[0] or "\t" in table.header[0]):
+            hint = "; the file seems to use ';' or tab as delimiter, expected ','"
+        else:
+            lower = {name.lower(): name for name in table.header}
+            near = [f"{lower[c.lower()]!r} (expected {c!r})" for c in missing if c.lower() in lower]
+            if near:
+                hint = "; column names are case-sensitive: found " + ", ".join(near)
+        raise InputDataError(
+            f"{table.path}: missing column{'s' if len(missing) > 1 else ''} "
+            f"{', '.join(repr(c) for c in missing)}; found: {', '.join(found)}{more}{hint}"
+        )
+    if temperature_column is not None:
+        if temperature_column not in table.index:
+            raise InputDataError(
+                f"{table.path}: temperature column {temperature_column!r} not found; found: {', '.join(table.header)}"
+            )
+        if not (temperature_column.endswith("_C") or temperature_column.endswith("_K")):
+            raise InputDataError(
+                f"{table.path}: temperature column {temperature_column!r} must end in _C (°C) or _K (K) to give its unit"
+            )
+        return temperature_column, temperature_column[-1]
+    for name in TEMPERATURE_COLUMNS:
+        if name in table.index:
+            return name, name[-1]
+    return None, ""
+
+
+def _parse_column(table: _Table, name: str) -> np.ndarray:
+    """Column as float array; missing cells -> NaN; non-numeric cells -> InputDataError."""
+    cells = table.column(name)
+    try:
+        return np.asarray(cells, dtype=float)
+    except ValueError:
+        pass
+    out = np.empty(len(cells))
+    for k, cell in enumerate(cells):
+        text = cell.strip()
+        if text.lower() in _MISSING_STRINGS:
+            out[k] = math.nan
+            continue
+        try:
+            out[k] = float(text)
+        except ValueError:
+            shown = text if len(text) <= 30 else text[:27] + "..."
+            raise InputDataError(
+                f"{table.path}: {_where(table, k)}: column {name!r}: {shown!r} is not a number"
+            ) from None
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Plausibility checks shared with the bag reader
+# ---------------------------------------------------------------------------
+
+
+def voltage_response_score(voltage_v: np.ndarray, current_a: np.ndarray) -> float:
+    """How well the voltage responds to the current as a discharge-positive current should.
+
+    Two pieces of physics, both independent of the state of charge:
+
+    * at current steps the terminal voltage jumps the other way (ohmic drop:
+      ``dV ≈ -R dI``);
+    * while current flows, the voltage drifts down when ``current_a > 0``
+      (discharge) and up when ``current_a < 0`` (charge).
+
+    Each gives a normalised score in [-1, 1] (sum of the signed voltage changes
+    over the sum of their magnitudes); the result is their mean. It is
+    antisymmetric in the current sign: about +1 for a correct recording, about
+    -1 for one with the sign flipped, 0 when there is no evidence.
+    """
+    v = np.asarray(voltage_v, dtype=float)
+    i = np.asarray(current_a, dtype=float)
+    if len(i) < 3:
+        return 0.0
+    i_max = float(np.max(np.abs(i)))
+    if not np.isfinite(i_max) or i_max <= 0.0:
+        return 0.0
+    a, b = i[:-1], i[1:]
+    dv = np.diff(v)
+    di = np.diff(i)
+    scores = []
+    flowing = (np.abs(a) > 0.05 * i_max) & (np.abs(b) > 0.05 * i_max) & (np.sign(a) == np.sign(b))
+    den = float(np.sum(np.abs(dv[flowing])))
+    if den > 0.0:
+        scores.append(-float(np.sum(np.sign(a[flowing]) * dv[flowing])) / den)
+    steps = np.abs(di) > 0.1 * i_max
+    den = float(np.sum(np.abs(dv[steps])))
+    if den > 0.0:
+        scores.append(-float(np.sum(np.sign(di[steps]) * dv[steps])) / den)
+    return float(np.mean(scores)) if scores else 0.0
+
+
+def check_current_sign(time_s: np.ndarray, voltage_v: np.ndarray, current_a: np.ndarray, *, source: str) -> None:
+    """Raise :class:`InputDataError` when ``current_a`` looks like it is negative while discharging.
+
+    Rule (documented in the package README): the sign is rejected when
+
+    * the recording looks like a *charge* by throughput -- the charge integral
+      is negative **and** more than 60 % of the non-zero samples (``|I|`` above
+      1 % of the peak) are negative -- and the voltage response
+      (:func:`voltage_response_score`) does not clearly confirm the convention
+      (score below +0.3); **or**
+    * the voltage response clearly contradicts the convention (score below
+      -0.3: the voltage rises while ``current_a > 0`` and jumps up when it
+      steps up).
+
+    So a constant-current discharge followed by a longer CC-CV recharge (net
+    charge slightly negative, most samples negative, e.g. the LG M50 rate
+    tests) passes because its voltage confirms the sign, while the same file
+    with the sign flipped is rejected.
+    """
+    t = np.asarray(time_s, dtype=float)
+    v = np.asarray(voltage_v, dtype=float)
+    i = np.asarray(current_a, dtype=float)
+    if len(i) < 3:
+        return
+    i_max = float(np.max(np.abs(i)))
+    if i_max <= 0.0:
+        return
+    trapezoid = getattr(np, "trapezoid", None) or np.trapz
+    charge_ah = float(trapezoid(i, t)) / 3600.0
+    nonzero = i[np.abs(i) > 0.01 * i_max]
+    negative_fraction = float(np.mean(nonzero < 0.0)) if len(nonzero) else 0.0
+    score = voltage_response_score(v, i)
+    looks_like_charge = charge_ah < 0.0 and negative_fraction > 0.6
+    if (looks_like_charge and score < 0.3) or score < -0.3:
+        raise InputDataError(
+            f"{source}: current_A seems to use the wrong sign convention (net charge {charge_ah:+.4g} Ah, "
+            f"{100 * negative_fraction:.0f} % of the non-zero samples negative, voltage-response score {score:+.2f}, "
+            "where +1 means the voltage drops when current_A rises); current_A > 0 must mean DISCHARGE: "
+            "flip the sign of the column (sensor_msgs/BatteryState and many cyclers use negative = discharge), "
+            "or pass expect_discharge=False to skip this check"
+        )
+
+
+def check_units(voltage_v: np.ndarray, current_a: np.ndarray, *, source: str) -> None:
+    """Raise :class:`InputDataError` when voltage/current look like mV/mA."""
+    v_med = float(np.median(voltage_v)) if len(voltage_v) else 0.0
+    if v_med > MAX_PLAUSIBLE_VOLTAGE_V:
+        raise InputDataError(
+            f"{source}: column voltage_V has median {v_med:.6g}, which looks like millivolts; convert to volts"
+        )
+    abs_i = np.abs(current_a)
+    nonzero = abs_i[abs_i > 0.0]
+    i_med = float(np.median(nonzero)) if len(nonzero) else 0.0
+    if i_med > MAX_PLAUSIBLE_CURRENT_A:
+        raise InputDataError(
+            f"{source}: column current_A has median |I| {i_med:.6g}, which looks like milliamperes; convert to amperes"
+        )
+
+
+def check_temperature_k(temperature_k: np.ndarray, *, source: str, column: str) -> None:
+    """Raise :class:`InputDataError` when a temperature (in K) is implausible for its declared unit."""
+    finite = temperature_k[np.isfinite(temperature_k)]
+    if not len(finite):
+        return
+    med_c = float(np.median(finite)) - 273.15
+    lo, hi = PLAUSIBLE_TEMPERATURE_RANGE_C
+    if not lo <= med_c <= hi:
+        if column.endswith("_C") and med_c > hi:
+            hint = "; the values look like kelvin: name the column temperature_K or convert to °C"
+        elif column.endswith("_K") and med_c < lo:
+            hint = "; the values look like °C: name the column temperature_C or convert to K"
+        else:
+            hint = ""
+        raise InputDataError(
+            f"{source}: column {column!r} has median {med_c:.4g} °C, outside the plausible {lo:g}..{hi:g} °C{hint}"
+        )
+
+
+# ---------------------------------------------------------------------------
+# Building a Recording
+# ---------------------------------------------------------------------------
+
+
+def _fill_nearest(t: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Replace NaN by the value of the nearest finite sample in time."""
+    good = np.isfinite(values)
+    if good.all():
+        return values
+    tg, vg = t[good], values[good]
+    idx = np.clip(np.searchsorted(tg, t), 1, len(tg) - 1) if len(tg) > 1 else np.zeros(len(t), dtype=int)
+    if len(tg) > 1:
+        left = idx - 1
+        use_left = np.abs(t - tg[left]) <= np.abs(tg[idx] - t)
+        idx = np.where(use_left, left, idx)
+    out = values.copy()
+    out[~good] = vg[idx[~good]]
+    return out
+
+
+def _build(
+    table: _Table,
+    row_idx: np.ndarray,
+    columns: dict[str, np.ndarray],
+    temp_name: str | None,
+    temp_unit: str,
+    *,
+    source: str,
+    expect_discharge: bool,
+    drop_nan: bool,
+    duplicate_times: str,
+    metadata: dict[str, Any],
+) -> Recording:
+    """Validate one record (the table rows ``row_idx``, 0-based) and make a Recording."""
+    path = table.path
+    rows = row_idx + 1  # 1-based data row numbers
+    t = columns["time_s"][row_idx]
+    v = columns["voltage_V"][row_idx]
+    i = columns["current_A"][row_idx]
+    temp = columns[temp_name][row_idx] if temp_name else None
+    meta = dict(metadata)
+
+    def where(k: int) -> str:
+        return _where(table, k, rows)
+
+    bad = ~(np.isfinite(t) & np.isfinite(v) & np.isfinite(i))
+    if bad.any() and not drop_nan:
+        k = int(np.argmax(bad))
+        cols = [name for name, arr in (("time_s", t), ("voltage_V", v), ("current_A", i)) if not np.isfinite(arr[k])]
+        cells = table.rows[row_idx[k]]
+        raw = [cells[table.index[c]] if table.index[c] < len(cells) else "" for c in cols]
+        what = ", ".join(f"{c}={r.strip()!r}" for c, r in zip(cols, raw))
+        raise InputDataError(
+            f"{source}: {where(k)}: empty or non-finite value ({what}); "
+            f"{int(bad.sum())} such row(s); pass drop_nan=True to drop them"
+        )
+    nonpositive = np.isfinite(v) & (v <= 0)
+    if nonpositive.any() and not drop_nan:
+        k = int(np.argmax(nonpositive))
+        raise InputDataError(
+            f"{source}: {where(k)}: voltage_V {v[k]!r} is not positive "
+            f"({int(nonpositive.sum())} such row(s)); pass drop_nan=True to drop them"
+        )
+    bad |= nonpositive
+    if bad.any():
+        keep = ~bad
+        meta["dropped_nan_rows"] = int(bad.sum())
+        rows, t, v, i = rows[keep], t[keep], v[keep], i[keep]
+        temp = temp[keep] if temp is not None else None
+        if not len(t):
+            raise InputDataError(f"{source}: no rows left after dropping rows with empty time_s/voltage_V/current_A")
+
+    dt = np.diff(t)
+    if (dt < 0).any() or ((dt == 0).any() and duplicate_times == "error"):
+        k = int(np.argmax(dt <= 0)) + 1 if duplicate_times == "error" else int(np.argmax(dt < 0)) + 1
+        prev_line = table.lines[rows[k - 1] - 1]
+        if t[k] == t[k - 1]:
+            hint = ("repeated timestamp (common at step changes in cycler exports): pass duplicate_times='keep_last' "
+                    "to keep the last row of each repeated time")
+        else:
+            hint = "time goes backwards"
+            group_like = [c for c in ("soc_label", "cell", "cycle", "step", "test", "record", "run") if c in table.index]
+            if group_like and "group" not in meta:
+                hint += f"; columns {', '.join(group_like)} suggest several records in one file: use load_csv_groups"
+        raise InputDataError(
+            f"{source}: {where(k)}: time_s {t[k]!r} is not greater than {t[k - 1]!r} on line {prev_line}; "
+            f"time_s must be strictly increasing ({hint})"
+        )
+    if (dt == 0).any():
+        same_next = np.append(dt == 0, False)  # row k has the same time as row k+1
+        same_prev = np.insert(dt == 0, 0, False)  # row k has the same time as row k-1
+        keep = ~same_next if duplicate_times == "keep_last" else ~same_prev
+        meta["dropped_duplicate_time_rows"] = int((~keep).sum())
+        rows, t, v, i = rows[keep], t[keep], v[keep], i[keep]
+        temp = temp[keep] if temp is not None else None
+
+    check_units(v, i, source=source)
+
+    temperature_k = None
+    if temp is not None:
+        finite = np.isfinite(temp)
+        if finite.any():
+            if not finite.all():
+                if not drop_nan:
+                    k = int(np.argmax(~finite))
+                    raise InputDataError(
+                        f"{source}: {where(k)}: column {temp_name!r} is empty or non-finite "
+                        f"({int((~finite).sum())} such row(s)); pass drop_nan=True to fill gaps from the nearest "
+                        "measured sample"
+                    )
+                meta["filled_temperature_rows"] = int((~finite).sum())
+                temp = _fill_nearest(t, temp)
+            temperature_k = celsius_to_kelvin(temp) if temp_unit == "C" else np.asarray(temp, dtype=float)
+            check_temperature_k(temperature_k, source=source, column=str(temp_name))
+        meta["temperature_column"] = temp_name if temperature_k is not None else None
+    else:
+        meta["temperature_column"] = None
+
+    if expect_discharge:
+        check_current_sign(t, v, i, source=source)
+    return Recording(
+        time_s=np.ascontiguousarray(t),
+        voltage_v=np.ascontiguousarray(v),
+        current_a=np.ascontiguousarray(i),
+        temperature_k=None if temperature_k is None else np.ascontiguousarray(temperature_k),
+        source=source,
+        metadata=meta,
+    )
+
+
+def _check_options(duplicate_times: str) -> None:
+    if duplicate_times not in DUPLICATE_TIME_POLICIES:
+        raise InputDataError(
+            f"duplicate_times must be one of {', '.join(DUPLICATE_TIME_POLICIES)}, got {duplicate_times!r}"
+        )
+
+
+def load_csv(
+    path: str | os.PathLike[str],
+    *,
+    expect_discharge: bool = True,
+    drop_nan: bool = False,
+    duplicate_times: str = "error",
+    temperature_column: str | None = None,
+) -> Recording:
+    """Load one recording from a measurement CSV (see the module docstring for the format).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        CSV file with ``time_s``, ``voltage_V``, ``current_A`` columns.
+    expect_discharge : bool
+        Check that ``current_A > 0`` means discharge (:func:`check_current_sign`).
+        Pass False for recordings where the check cannot decide (pure charge
+        with no usable voltage response, synthetic data with constant voltage).
+    drop_nan : bool
+        Drop rows with an empty/NaN/inf time, voltage or current or a voltage
+        <= 0 V (a logging glitch), and fill
+        temperature gaps from the nearest measured sample, instead of raising.
+        The counts are in ``metadata["dropped_nan_rows"]`` and
+        ``metadata["filled_temperature_rows"]``.
+    duplicate_times : {"error", "keep_first", "keep_last"}
+        What to do with consecutive rows that have the same ``time_s``.
+    temperature_column : str, optional
+        Use this column as temperature (name must end in ``_C`` or ``_K``)
+        instead of the first match in :data:`TEMPERATURE_COLUMNS`.
+
+    Returns
+    -------
+    Recording
+        ``source`` is the path; ``metadata`` holds ``temperature_column`` and
+        the counts of rows dropped or filled by the options above.
+
+    Raises
+    ------
+    InputDataError
+        One line naming the file, the line/column and the problem.
+    """
+    _check_options(duplicate_times)
+    p = Path(path)
+    table = _read_table(p)
+    temp_name, temp_unit = _find_columns(table, temperature_column)
+    names = [*REQUIRED_COLUMNS, *([temp_name] if temp_name else [])]
+    columns = {name: _parse_column(table, name) for name in names}
+    return _build(
+        table,
+        np.arange(len(table.rows)),
+        columns,
+        temp_name,
+        temp_unit,
+        source=str(p),
+        expect_discharge=expect_discharge,
+        drop_nan=drop_nan,
+        duplicate_times=duplicate_times,
+        metadata={},
+    )
+
+
+def load_csv_groups(
+    path: str | os.PathLike[str],
+    by: Sequence[str],
+    *,
+    expect_discharge: bool = True,
+    drop_nan: bool = False,
+    duplicate_times: str = "error",
+    temperature_column: str | None = None,
+) -> dict[tuple[str, ...], Recording]:
+    """Load a long-format CSV that holds several records, one per value of the ``by`` columns.
+
+    Each record is validated like :func:`load_csv` (line numbers refer to the
+    whole file). Records keep the order of their first row in the file.
+
+    Returns
+    -------
+    dict
+        ``{(value_of_by[0], ...): Recording}``; each Recording has
+        ``metadata["group"] = {column: value}`` and a ``source`` like
+        ``"file.csv [soc_label=SoC5, cell=Cell1]"``.
+    """
+    _check_options(duplicate_times)
+    p = Path(path)
+    by = [by] if isinstance(by, str) else list(by)
+    if not by:
+        raise InputDataError(f"{p}: load_csv_groups needs at least one grouping column")
+    table = _read_table(p)
+    missing = [c for c in by if c not in table.index]
+    if missing:
+        raise InputDataError(
+            f"{p}: missing grouping column{'s' if len(missing) > 1 else ''} "
+            f"{', '.join(repr(c) for c in missing)}; found: {', '.join(table.header)}"
+        )
+    temp_name, temp_unit = _find_columns(table, temperature_column)
+    names = [*REQUIRED_COLUMNS, *([temp_name] if temp_name else [])]
+    columns = {name: _parse_column(table, name) for name in names}
+    keys_per_column = [[cell.strip() for cell in table.column(c)] for c in by]
+    groups: dict[tuple[str, ...], list[int]] = {}
+    for k, key in enumerate(zip(*keys_per_column)):
+        groups.setdefault(tuple(key), []).append(k)
+    out: dict[tuple[str, ...], Recording] = {}
+    for key, idx in groups.items():
+        label = ", ".join(f"{c}={val}" for c, val in zip(by, key))
+        out[key] = _build(
+            table,
+            np.asarray(idx),
+            columns,
+            temp_name,
+            temp_unit,
+            source=f"{p} [{label}]",
+            expect_discharge=expect_discharge,
+            drop_nan=drop_nan,
+            duplicate_times=duplicate_times,
+            metadata={"group": dict(zip(by, key))},
+        )
+    return out
+
+
+def save_csv(recording: Recording, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+    """Write ``time_s,voltage_V,current_A[,temperature_C]`` (current positive = discharge).
+
+    Floats are written with the shortest representation that reads back to
+    the same value, so :func:`load_csv` returns identical time, voltage and
+    current arrays (temperature goes through °C and back, equal to ~1e-13 K).
+    NaN temperatures are written as empty cells. ``recording.metadata`` is not
+    stored (CSV has no place for it; use a bag to keep it). The file is written
+    to a temporary file first and renamed, so a failed write leaves no partial
+    CSV behind.
+    """
+    p = Path(path)
+    if p.exists() and (p.is_dir() or not overwrite):
+        raise InputDataError(f"{p}: already exists; not overwriting")
+    if not p.parent.is_dir():
+        raise InputDataError(f"{p}: directory {p.parent} does not exist")
+    header = ["time_s", "voltage_V", "current_A"]
+    cols = [np.asarray(recording.time_s, float), np.asarray(recording.voltage_v, float), np.asarray(recording.current_a, float)]
+    if recording.temperature_k is not None:
+        header.append("temperature_C")
+        cols.append(np.asarray(kelvin_to_celsius(np.asarray(recording.temperature_k, float))))
+
+    def fmt(x: float) -> str:
+        return repr(x) if math.isfinite(x) else ""
+
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(",".join(header) + "\n")
+            for values in zip(*(c.tolist() for c in cols)):
+                fh.write(",".join(fmt(x) for x in values) + "\n")
+        os.replace(tmp, p)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise InputDataError(f"{p}: cannot write CSV ({exc.strerror or exc})") from None
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return p

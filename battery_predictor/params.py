@@ -1,0 +1,433 @@
+"""Pack parameter files (``params/*.yaml``): the one way to describe any pack.
+
+A params file names the pack configuration (series x parallel), the PyBaMM base
+parameter set of its cells, the values set by hand and the fitted values (as
+PyBaMM ``"Name [unit]"`` keys), the liionpack interconnect resistances, the
+decision thresholds and what a fit may vary. Every value carries its unit in its
+key: PyBaMM keys keep their ``[unit]`` bracket, our own keys end in a unit suffix
+(``_v``, ``_a``, ``_s``, ``_k``, ``_ah``, ``_ohm``...).
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from battery_predictor.errors import ParamsError
+
+#: Unit suffixes accepted on our own (non-PyBaMM) keys.
+UNIT_SUFFIXES = (
+    "_v", "_a", "_s", "_k", "_ah", "_ohm", "_pct", "_m", "_kg", "_m_s", "_w", "_c_rate", "_hz", "_fraction", "_c",
+)
+#: Model types a params file may ask for.
+MODEL_TYPES = ("SPM", "SPMe", "DFN")
+#: Interconnect resistances of the liionpack netlist (busbar, connection, internal guess, terminal).
+INTERCONNECT_KEYS = ("r_b_ohm", "r_c_ohm", "r_i_ohm", "r_t_ohm")
+_TOP_LEVEL = ("name", "description", "pack", "cell", "interconnect", "thresholds", "operating", "fit", "extensions",
+              "provenance")
+_PACK_KEYS = {"series": int, "parallel": int, "nominal_voltage_v": float, "nominal_capacity_ah": float,
+              "min_voltage_v": float, "max_voltage_v": float}
+_CELL_KEYS = ("model", "base_parameter_set", "options", "manual", "fitted", "extra")
+_FIT_KEYS = ("parameters", "bounds")
+_UNIT_BRACKET = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\]]*)\]\s*$")
+
+
+@functools.lru_cache(maxsize=16)
+def _base_keys(base_parameter_set: str) -> frozenset[str]:
+    import pybamm
+
+    return frozenset(pybamm.ParameterValues(base_parameter_set).keys())
+
+
+def _strip_unit(key: str) -> str:
+    m = _UNIT_BRACKET.match(key)
+    return m.group("name") if m else key.strip()
+
+
+def check_pybamm_key(key: str, base_parameter_set: str, source: str, extra_allowed: frozenset[str] = frozenset()) -> None:
+    """Raise :class:`ParamsError` unless ``key`` is a parameter of the base set (with its unit).
+
+    Parameters
+    ----------
+    key : str
+        A PyBaMM parameter name such as ``"Electrode height [m]"``.
+    base_parameter_set : str
+        PyBaMM parameter set name (``"Chen2020"``...).
+    source : str
+        File name used in the message.
+    extra_allowed : frozenset of str
+        Keys that are valid although the base set lacks them (model-option parameters).
+    """
+    keys = _base_keys(base_parameter_set) | extra_allowed
+    if key in keys:
+        return
+    bare = _strip_unit(key)
+    same_name = sorted(k for k in keys if _strip_unit(k) == bare)
+    if same_name:
+        if "[" not in key:
+            raise ParamsError(f"{source}: key '{key}': missing unit, use '{same_name[0]}'")
+        raise ParamsError(f"{source}: key '{key}': wrong unit, {base_parameter_set} defines '{same_name[0]}'")
+    raise ParamsError(f"{source}: unknown key '{key}': not a parameter of PyBaMM set {base_parameter_set}")
+
+
+def _check_unit_suffix(key: str, source: str, section: str) -> None:
+    if not any(key.endswith(s) for s in UNIT_SUFFIXES):
+        raise ParamsError(
+            f"{source}: key '{section}.{key}': missing unit; our keys end in a unit suffix such as "
+            f"{', '.join(UNIT_SUFFIXES[:6])}"
+        )
+
+
+def _as_float(value: Any, source: str, key: str) -> float:
+    if isinstance(value, bool):
+        raise ParamsError(f"{source}: key '{key}': expected a number, got {value!r}")
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise ParamsError(f"{source}: key '{key}': expected a number, got {value!r}") from None
+    if not math.isfinite(out):
+        raise ParamsError(f"{source}: key '{key}': value {value!r} is not finite")
+    return out
+
+
+@dataclass(frozen=True)
+class FitSpec:
+    """What a fit may vary and within which bounds.
+
+    Attributes
+    ----------
+    parameters : tuple of str
+        PyBaMM keys and/or interconnect names (``r_b_ohm``...).
+    bounds : dict
+        Optional explicit ``{name: (low, high)}`` bounds overriding the default rule.
+    """
+
+    parameters: tuple[str, ...] = ()
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class PackParams:
+    """A parsed, validated params file.
+
+    Attributes
+    ----------
+    name : str
+        Pack identifier.
+    series, parallel : int
+        Cells in series per string and strings in parallel.
+    base_parameter_set : str
+        PyBaMM parameter set the cell values start from.
+    model : str
+        ``"SPM"`` (default), ``"SPMe"`` or ``"DFN"``.
+    options : dict
+        PyBaMM model options (e.g. ``{"thermal": "lumped"}``).
+    manual, fitted : dict
+        PyBaMM ``"Name [unit]"`` values set by hand, and fitted values (fitted wins).
+    interconnect : dict
+        ``r_b_ohm``, ``r_c_ohm``, ``r_i_ohm``, ``r_t_ohm`` in Ohm.
+    thresholds, operating, pack_info : dict
+        Unit-suffixed scalars (decision thresholds, ambient temperature, nominal values).
+    fit : FitSpec
+        Fit parameters and bounds.
+    extensions : tuple of str
+        Active model extensions (see :mod:`battery_predictor.extensions`).
+    provenance : dict
+        Free-form record of where fitted values came from.
+    source : str
+        File the params were loaded from.
+    """
+
+    name: str
+    series: int
+    parallel: int
+    base_parameter_set: str
+    model: str = "SPM"
+    options: dict[str, Any] = field(default_factory=dict)
+    manual: dict[str, float] = field(default_factory=dict)
+    fitted: dict[str, float] = field(default_factory=dict)
+    extra: dict[str, float] = field(default_factory=dict)
+    interconnect: dict[str, float] = field(default_factory=dict)
+    thresholds: dict[str, float] = field(default_factory=dict)
+    operating: dict[str, float] = field(default_factory=dict)
+    pack_info: dict[str, float] = field(default_factory=dict)
+    fit: FitSpec = field(default_factory=FitSpec)
+    extensions: tuple[str, ...] = ()
+    provenance: dict[str, Any] = field(default_factory=dict)
+    description: str = ""
+    source: str = "<memory>"
+
+    # ------------------------------------------------------------------ values
+    @property
+    def n_cells(self) -> int:
+        """Number of cells in the pack."""
+        return self.series * self.parallel
+
+    @property
+    def cell_values(self) -> dict[str, float]:
+        """PyBaMM values that differ from the base set (manual, then fitted, then extension extras)."""
+        out = dict(self.manual)
+        out.update(self.fitted)
+        out.update(self.extra)
+        return out
+
+    @property
+    def ambient_temperature_k(self) -> float:
+        """Default ambient temperature in K."""
+        return float(self.operating.get("ambient_temperature_k", 298.15))
+
+    @property
+    def cell_lower_cutoff_v(self) -> float:
+        """Cell-level lower voltage cut-off in V (the liionpack termination criterion)."""
+        return float(self.parameter_values()["Lower voltage cut-off [V]"])
+
+    def value(self, name: str) -> float:
+        """Current value of a fit parameter (PyBaMM key or interconnect name)."""
+        if name in INTERCONNECT_KEYS:
+            return float(self.interconnect[name])
+        vals = self.cell_values
+        if name in vals:
+            return float(vals[name])
+        v = self.parameter_values()[name]
+        if not isinstance(v, (int, float)):
+            raise ParamsError(f"{self.source}: parameter '{name}' is a function in {self.base_parameter_set}, "
+                              "it cannot be fitted as a scalar")
+        return float(v)
+
+    def parameter_values(self):
+        """PyBaMM ``ParameterValues``: base set updated with manual, fitted and extension values."""
+        import pybamm
+
+        pv = pybamm.ParameterValues(self.base_parameter_set)
+        pv.update(self.cell_values, check_already_exists=False)
+        return pv
+
+    def with_values(self, updates: Mapping[str, float], **changes: Any) -> PackParams:
+        """Return a copy with fit-parameter values replaced (PyBaMM keys go to ``fitted``)."""
+        fitted = dict(self.fitted)
+        interconnect = dict(self.interconnect)
+        for key, val in updates.items():
+            if key in INTERCONNECT_KEYS:
+                interconnect[key] = float(val)
+            else:
+                fitted[key] = float(val)
+        return replace(self, fitted=fitted, interconnect=interconnect, **changes)
+
+    # ------------------------------------------------------------------ output
+    def to_dict(self) -> dict[str, Any]:
+        """The params as a YAML-ready dict (same layout as the files in ``params/``)."""
+        out: dict[str, Any] = {
+            "name": self.name,
+            "description": self.description,
+            "pack": {"series": self.series, "parallel": self.parallel, **self.pack_info},
+            "cell": {
+                "model": self.model,
+                "base_parameter_set": self.base_parameter_set,
+                "options": copy.deepcopy(self.options),
+                "manual": dict(self.manual),
+                "fitted": dict(self.fitted),
+            },
+            "interconnect": dict(self.interconnect),
+            "thresholds": dict(self.thresholds),
+            "operating": dict(self.operating),
+            "fit": {"parameters": list(self.fit.parameters)},
+            "extensions": list(self.extensions),
+        }
+        if self.extra:
+            out["cell"]["extra"] = dict(self.extra)
+        if self.fit.bounds:
+            out["fit"]["bounds"] = {k: [float(lo), float(hi)] for k, (lo, hi) in self.fit.bounds.items()}
+        if self.provenance:
+            out["provenance"] = copy.deepcopy(self.provenance)
+        return out
+
+    def to_yaml(self, path: str | Path) -> Path:
+        """Write the params to ``path`` (loadable by :func:`load_params`)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        header = (f"# Pack params '{self.name}' written by battery_predictor.\n"
+                  "# Units are in the keys: PyBaMM '[unit]' brackets, or *_v/_a/_s/_k/_ah/_ohm suffixes.\n")
+        path.write_text(header + yaml.safe_dump(self.to_dict(), sort_keys=False, allow_unicode=True))
+        return path
+
+
+def _section(data: Mapping[str, Any], key: str, source: str, required: bool = True) -> dict[str, Any]:
+    if key not in data or data[key] is None:
+        if required:
+            raise ParamsError(f"{source}: missing section '{key}'")
+        return {}
+    val = data[key]
+    if not isinstance(val, Mapping):
+        raise ParamsError(f"{source}: section '{key}' must be a mapping, got {type(val).__name__}")
+    return dict(val)
+
+
+def _unit_scalars(section: Mapping[str, Any], name: str, source: str) -> dict[str, float]:
+    out = {}
+    for k, v in section.items():
+        _check_unit_suffix(str(k), source, name)
+        out[str(k)] = _as_float(v, source, f"{name}.{k}")
+    return out
+
+
+def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackParams:
+    """Validate a params mapping (as read from YAML) and build :class:`PackParams`.
+
+    Raises
+    ------
+    ParamsError
+        On an unknown key, a key without a unit, a wrong type or an impossible value;
+        the message names ``source`` and the key.
+    """
+    if not isinstance(data, Mapping):
+        raise ParamsError(f"{source}: top level must be a mapping")
+    for key in data:
+        if key not in _TOP_LEVEL:
+            raise ParamsError(f"{source}: unknown key '{key}' (allowed: {', '.join(_TOP_LEVEL)})")
+    name = str(data.get("name") or Path(source).stem)
+
+    pack = _section(data, "pack", source)
+    for key in pack:
+        if key not in _PACK_KEYS:
+            if not any(str(key).endswith(s) for s in UNIT_SUFFIXES):
+                raise ParamsError(f"{source}: key 'pack.{key}': missing unit or unknown key")
+            raise ParamsError(f"{source}: unknown key 'pack.{key}' (allowed: {', '.join(_PACK_KEYS)})")
+    for key in ("series", "parallel"):
+        if key not in pack:
+            raise ParamsError(f"{source}: missing key 'pack.{key}'")
+        val = pack[key]
+        if isinstance(val, bool) or not isinstance(val, int) or val < 1:
+            raise ParamsError(f"{source}: key 'pack.{key}': expected a positive integer, got {val!r}")
+    pack_info = {k: _as_float(v, source, f"pack.{k}") for k, v in pack.items() if k not in ("series", "parallel")}
+
+    cell = _section(data, "cell", source)
+    for key in cell:
+        if key not in _CELL_KEYS:
+            raise ParamsError(f"{source}: unknown key 'cell.{key}' (allowed: {', '.join(_CELL_KEYS)})")
+    base = cell.get("base_parameter_set")
+    if not isinstance(base, str):
+        raise ParamsError(f"{source}: missing key 'cell.base_parameter_set' (a PyBaMM parameter set name)")
+    import pybamm
+
+    if base not in pybamm.parameter_sets:
+        raise ParamsError(f"{source}: key 'cell.base_parameter_set': unknown PyBaMM parameter set '{base}'")
+    model = str(cell.get("model", "SPM"))
+    if model not in MODEL_TYPES:
+        raise ParamsError(f"{source}: key 'cell.model': '{model}' is not one of {', '.join(MODEL_TYPES)}")
+    options = cell.get("options") or {}
+    if not isinstance(options, Mapping):
+        raise ParamsError(f"{source}: key 'cell.options' must be a mapping of PyBaMM model options")
+    extra = {}
+    for key, val in (cell.get("extra") or {}).items():
+        if "[" not in str(key) and not str(key).endswith("fraction"):
+            raise ParamsError(f"{source}: key 'cell.extra.{key}': missing unit (use a PyBaMM '[unit]' key)")
+        extra[str(key)] = _as_float(val, source, f"cell.extra.{key}")
+    values: dict[str, dict[str, float]] = {}
+    for sec in ("manual", "fitted"):
+        values[sec] = {}
+        raw = cell.get(sec) or {}
+        if not isinstance(raw, Mapping):
+            raise ParamsError(f"{source}: key 'cell.{sec}' must be a mapping of PyBaMM keys to numbers")
+        for key, val in raw.items():
+            check_pybamm_key(str(key), base, source, frozenset(extra))
+            values[sec][str(key)] = _as_float(val, source, f"cell.{sec}.{key}")
+
+    inter_raw = _section(data, "interconnect", source, required=False)
+    interconnect = {"r_b_ohm": 1e-4, "r_c_ohm": 1e-2, "r_i_ohm": 1e-2, "r_t_ohm": 1e-5}
+    for key, val in inter_raw.items():
+        if key not in INTERCONNECT_KEYS:
+            if not any(str(key).endswith(s) for s in UNIT_SUFFIXES):
+                raise ParamsError(f"{source}: key 'interconnect.{key}': missing unit (expected one of "
+                                  f"{', '.join(INTERCONNECT_KEYS)})")
+            raise ParamsError(f"{source}: unknown key 'interconnect.{key}' (allowed: {', '.join(INTERCONNECT_KEYS)})")
+        v = _as_float(val, source, f"interconnect.{key}")
+        if v < 0:
+            raise ParamsError(f"{source}: key 'interconnect.{key}': resistance must be >= 0, got {v}")
+        interconnect[key] = v
+
+    thresholds = _unit_scalars(_section(data, "thresholds", source, required=False), "thresholds", source)
+    operating = _unit_scalars(_section(data, "operating", source, required=False), "operating", source)
+
+    fit_raw = _section(data, "fit", source, required=False)
+    for key in fit_raw:
+        if key not in _FIT_KEYS:
+            raise ParamsError(f"{source}: unknown key 'fit.{key}' (allowed: {', '.join(_FIT_KEYS)})")
+    fit_params = []
+    for p in fit_raw.get("parameters") or []:
+        p = str(p)
+        if p not in INTERCONNECT_KEYS:
+            check_pybamm_key(p, base, source, frozenset(extra))
+        fit_params.append(p)
+    bounds = {}
+    for key, pair in (fit_raw.get("bounds") or {}).items():
+        if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+            raise ParamsError(f"{source}: key 'fit.bounds.{key}': expected [low, high]")
+        lo, hi = (_as_float(x, source, f"fit.bounds.{key}") for x in pair)
+        if not lo < hi:
+            raise ParamsError(f"{source}: key 'fit.bounds.{key}': low {lo} must be below high {hi}")
+        bounds[str(key)] = (lo, hi)
+
+    extensions = data.get("extensions") or []
+    if not isinstance(extensions, list):
+        raise ParamsError(f"{source}: key 'extensions' must be a list of extension names")
+    from battery_predictor.extensions import EXTENSION_NAMES
+
+    for ext in extensions:
+        if ext not in EXTENSION_NAMES:
+            raise ParamsError(f"{source}: key 'extensions': unknown extension '{ext}' "
+                              f"(known: {', '.join(EXTENSION_NAMES)})")
+
+    provenance = data.get("provenance") or {}
+    if not isinstance(provenance, Mapping):
+        raise ParamsError(f"{source}: key 'provenance' must be a mapping")
+
+    return PackParams(
+        name=name,
+        description=str(data.get("description") or ""),
+        series=int(pack["series"]),
+        parallel=int(pack["parallel"]),
+        base_parameter_set=base,
+        model=model,
+        options=dict(options),
+        manual=values["manual"],
+        fitted=values["fitted"],
+        extra=extra,
+        interconnect=interconnect,
+        thresholds=thresholds,
+        operating=operating,
+        pack_info=pack_info,
+        fit=FitSpec(parameters=tuple(fit_params), bounds=bounds),
+        extensions=tuple(str(e) for e in extensions),
+        provenance=dict(provenance),
+        source=source,
+    )
+
+
+def load_params(path: str | Path) -> PackParams:
+    """Load and validate a params YAML file.
+
+    Raises
+    ------
+    ParamsError
+        Missing file, YAML syntax error, or any validation problem (message names the file and key).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ParamsError(f"{path}: params file not found")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark is not None else ""
+        raise ParamsError(f"{path}:{where} YAML syntax error: {getattr(exc, 'problem', exc)}") from None
+    if data is None:
+        raise ParamsError(f"{path}: params file is empty")
+    return params_from_dict(data, source=str(path))

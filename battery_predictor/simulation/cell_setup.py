@@ -1,0 +1,133 @@
+"""PyBaMM cell model and parameter values for a pack's cells (shared by both simulators)."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+from collections.abc import Iterator
+
+import numpy as np
+
+from battery_predictor.errors import SimulationError
+
+#: PyBaMM parameters that may be turned into ``[input]`` parameters without a rebuild
+#: (they do not change the mesh or the model structure). Geometric lengths (thickness,
+#: particle radius) shape the mesh and need a rebuild.
+INPUT_SAFE_KEYS = frozenset({
+    "Electrode height [m]",
+    "Electrode width [m]",
+    "Initial concentration in negative electrode [mol.m-3]",
+    "Initial concentration in positive electrode [mol.m-3]",
+    "Maximum concentration in negative electrode [mol.m-3]",
+    "Maximum concentration in positive electrode [mol.m-3]",
+    "Negative electrode active material volume fraction",
+    "Positive electrode active material volume fraction",
+    "Negative particle diffusivity [m2.s-1]",
+    "Positive particle diffusivity [m2.s-1]",
+    "Ambient temperature [K]",
+    "Initial temperature [K]",
+    "Contact resistance [Ohm]",
+    "Total heat transfer coefficient [W.m-2.K-1]",
+})
+#: Always passed as inputs (state initialisation and temperature).
+ALWAYS_INPUT_KEYS = (
+    "Initial concentration in negative electrode [mol.m-3]",
+    "Initial concentration in positive electrode [mol.m-3]",
+    "Ambient temperature [K]",
+    "Initial temperature [K]",
+)
+#: Discharge simulations do not use the upper cut-off; the event is moved out of the way
+#: (some published fits start above their own upper cut-off, e.g. the paper's Table 3).
+RELAXED_UPPER_CUTOFF_V = 5.0
+
+
+@contextlib.contextmanager
+def quiet_pybamm() -> Iterator[None]:
+    """Silence PyBaMM/liionpack loggers and tqdm bars inside the block."""
+    import pybamm
+
+    old_level = pybamm.logger.level
+    old_tqdm = os.environ.get("TQDM_DISABLE")
+    pybamm.logger.setLevel(logging.ERROR)
+    os.environ["TQDM_DISABLE"] = "1"
+    _silence_liionpack_tqdm()
+    try:
+        yield
+    finally:
+        pybamm.logger.setLevel(old_level)
+        if old_tqdm is None:
+            os.environ.pop("TQDM_DISABLE", None)
+        else:
+            os.environ["TQDM_DISABLE"] = old_tqdm
+
+
+def _silence_liionpack_tqdm() -> None:
+    """liionpack shows a tqdm bar per solve; its ``tqdm`` is replaced by a disabled one."""
+    import functools
+    import sys
+
+    solvers = sys.modules.get("liionpack.solvers")
+    if solvers is not None and not isinstance(getattr(solvers, "tqdm", None), functools.partial):
+        import tqdm
+
+        solvers.tqdm = functools.partial(tqdm.tqdm, disable=True)
+
+
+def model_options(params) -> dict:
+    """PyBaMM model options for ``params`` (file options plus active extensions)."""
+    from battery_predictor.diagnosis.extensions_impl import extension_model_options
+
+    opts = dict(params.options)
+    opts.update(extension_model_options(params))
+    return opts
+
+
+def build_model(params, *, for_liionpack: bool = False):
+    """A fresh PyBaMM model of the params' type (SPM, SPMe or DFN) with its options."""
+    import pybamm
+
+    cls = {"SPM": pybamm.lithium_ion.SPM, "SPMe": pybamm.lithium_ion.SPMe, "DFN": pybamm.lithium_ion.DFN}[
+        params.model
+    ]
+    try:
+        model = cls(options=model_options(params))
+    except pybamm.OptionError as exc:
+        raise SimulationError(f"{params.source}: invalid model options: {exc}") from None
+    if for_liionpack:
+        import liionpack as lp
+
+        model = lp.add_events_to_model(model)
+    return model
+
+
+def prepared_parameter_values(params):
+    """Parameter values ready to simulate a discharge (upper cut-off event relaxed)."""
+    pv = params.parameter_values()
+    pv["Upper voltage cut-off [V]"] = max(float(pv["Upper voltage cut-off [V]"]), RELAXED_UPPER_CUTOFF_V)
+    return pv
+
+
+def initial_concentrations(params, pv, *, initial_soc: float | None, initial_cell_ocv_v: float | None):
+    """Initial electrode concentrations (mol/m3) for an SOC or an open-circuit voltage.
+
+    Returns the params' own initial concentrations when both are None.
+    """
+    import pybamm
+
+    c_n_max = float(pv["Maximum concentration in negative electrode [mol.m-3]"])
+    c_p_max = float(pv["Maximum concentration in positive electrode [mol.m-3]"])
+    if initial_soc is None and initial_cell_ocv_v is None:
+        return (float(pv["Initial concentration in negative electrode [mol.m-3]"]),
+                float(pv["Initial concentration in positive electrode [mol.m-3]"]))
+    if initial_soc is not None and not (0.0 <= initial_soc <= 1.0):
+        raise SimulationError(f"initial SOC must be within 0..1, got {initial_soc}")
+    value = initial_soc if initial_soc is not None else f"{initial_cell_ocv_v} V"
+    try:
+        x, y = pybamm.lithium_ion.get_initial_stoichiometries(value, pv)
+    except (ValueError, pybamm.SolverError, ZeroDivisionError) as exc:
+        raise SimulationError(f"cannot set the initial state {value!r}: {exc}") from None
+    x, y = float(x), float(y)
+    if not (0 < x < 1 and 0 < y < 1 and np.isfinite(x) and np.isfinite(y)):
+        raise SimulationError(f"initial state {value!r} gives stoichiometries outside (0, 1): {x:.3f}, {y:.3f}")
+    return x * c_n_max, y * c_p_max

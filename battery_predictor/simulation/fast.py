@@ -1,0 +1,157 @@
+"""Fast pack simulator for packs of identical cells.
+
+One PyBaMM cell carries ``I_pack / parallel``; the pack voltage is
+``series * V_cell - I_pack * R_eq`` where ``R_eq`` is the interconnect resistance
+of liionpack's netlist reduced for identical cells
+(:func:`~battery_predictor.simulation.network.equivalent_network_resistance_ohm`).
+The simulation ends when the cell reaches its lower cut-off (the cell-level
+criterion liionpack applies to every cell).
+
+The piecewise-constant current is a PyBaMM interpolant; parameters that do not
+shape the mesh are ``[input]`` parameters, so a fit that only changes those
+re-solves the same built model. Voltages are reported just after each report
+time (right-continuous), as liionpack reports the voltage under the current that
+starts at that time.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+
+import numpy as np
+
+from battery_predictor.errors import SimulationError
+from battery_predictor.simulation.base import PackSimResult, SimulationRequest
+from battery_predictor.simulation.cell_setup import (
+    ALWAYS_INPUT_KEYS,
+    INPUT_SAFE_KEYS,
+    build_model,
+    initial_concentrations,
+    prepared_parameter_values,
+    quiet_pybamm,
+)
+from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+#: Width (s) of the ramp that stands for each current step in the interpolant.
+_EDGE_S = 1e-3
+
+
+class FastPackSimulator:
+    """Single-cell equivalent of a pack of identical cells (see module docstring).
+
+    Parameters
+    ----------
+    cache_size : int
+        Number of built PyBaMM simulations kept for re-solves.
+    rtol, atol : float
+        IDAKLU tolerances.
+    """
+
+    name = "fast"
+
+    def __init__(self, cache_size: int = 8, rtol: float = 1e-6, atol: float = 1e-8) -> None:
+        self._cache: OrderedDict[tuple, object] = OrderedDict()
+        self._cache_size = cache_size
+        self.rtol = rtol
+        self.atol = atol
+        self.builds = 0
+
+    # ----------------------------------------------------------------- public
+    def simulate(self, params, request: SimulationRequest) -> PackSimResult:
+        """Simulate ``request`` on the pack ``params``; see :class:`PackSimulator`."""
+        import pybamm
+
+        if request.cell_inputs:
+            raise SimulationError("the fast simulator only handles identical cells; use --simulator liionpack "
+                                  "for per-cell values")
+        tic = time.perf_counter()
+        pv = prepared_parameter_values(params)
+        temperature_k = float(request.ambient_temperature_k or params.ambient_temperature_k)
+        cell_ocv = None if request.initial_pack_ocv_v is None else request.initial_pack_ocv_v / params.series
+        c_n0, c_p0 = initial_concentrations(params, pv, initial_soc=request.initial_soc,
+                                            initial_cell_ocv_v=cell_ocv)
+        input_keys = sorted(set(ALWAYS_INPUT_KEYS) | (INPUT_SAFE_KEYS & set(params.cell_values)))
+        inputs = {}
+        for key in input_keys:
+            if key in ("Ambient temperature [K]", "Initial temperature [K]"):
+                inputs[key] = temperature_k
+            elif key == "Initial concentration in negative electrode [mol.m-3]":
+                inputs[key] = c_n0
+            elif key == "Initial concentration in positive electrode [mol.m-3]":
+                inputs[key] = c_p0
+            else:
+                val = pv[key]
+                if not isinstance(val, (int, float)):
+                    continue
+                inputs[key] = float(val)
+        sim, t_end = self._simulation(params, pv, request, tuple(sorted(inputs)))
+        try:
+            with quiet_pybamm():
+                sol = sim.solve(t_eval=[0.0, t_end], inputs=inputs)
+        except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError) as exc:
+            raise SimulationError(f"fast simulation failed: {str(exc).splitlines()[0]}") from None
+        return self._result(params, request, sol, tic)
+
+    # ---------------------------------------------------------------- helpers
+    def _simulation(self, params, pv, request: SimulationRequest, input_keys: tuple[str, ...]):
+        import pybamm
+
+        load = request.load
+        fixed = tuple(sorted((k, repr(v)) for k, v in params.cell_values.items() if k not in input_keys))
+        key = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions,
+               fixed, input_keys, load.digest(), params.parallel)
+        t_end = float(load.end_s) - _EDGE_S
+        if key in self._cache:
+            self._cache.move_to_end(key)
+            return self._cache[key], t_end
+        edges = load.edges_s()
+        knots_t = np.column_stack([edges[:-1], edges[1:] - _EDGE_S]).ravel()
+        knots_i = np.repeat(load.current_a / params.parallel, 2)
+        for k in input_keys:
+            pv[k] = "[input]"
+        pv["Current function [A]"] = pybamm.Interpolant(knots_t, knots_i, pybamm.t, interpolator="linear")
+        model = build_model(params)
+        solver = pybamm.IDAKLUSolver(rtol=self.rtol, atol=self.atol)
+        try:
+            with quiet_pybamm():
+                sim = pybamm.Simulation(model, parameter_values=pv, solver=solver)
+                sim.build()
+        except (pybamm.ModelError, pybamm.DiscretisationError, KeyError, ValueError) as exc:
+            raise SimulationError(f"cannot build the cell model: {str(exc).splitlines()[0]}") from None
+        self.builds += 1
+        self._cache[key] = sim
+        if len(self._cache) > self._cache_size:
+            self._cache.popitem(last=False)
+        return sim, t_end
+
+    def _result(self, params, request: SimulationRequest, sol, tic: float) -> PackSimResult:
+        load = request.load
+        t_sol_end = float(sol.t[-1])
+        termination = "cell_cutoff" if sol.termination and "Minimum voltage" in str(sol.termination) else (
+            "end_of_load")
+        if termination != "cell_cutoff" and t_sol_end < load.end_s - 2 * _EDGE_S - 1e-6:
+            termination = "cell_cutoff" if "event" in str(sol.termination) else "end_of_load"
+        t_out = request.output_times()
+        t_eval = np.minimum(t_out + 2 * _EDGE_S, load.end_s - 2 * _EDGE_S)
+        keep = t_eval <= t_sol_end + 1e-9
+        t_out, t_eval = t_out[keep], t_eval[keep]
+        v_cell = np.asarray(sol["Terminal voltage [V]"](t_eval), dtype=float)
+        i_pack = load.current_at(t_out)
+        p = params.interconnect
+        r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
+                                                 p["r_t_ohm"])
+        v_pack = params.series * v_cell - i_pack * r_eq
+        if not np.all(np.isfinite(v_pack)):
+            raise SimulationError("fast simulation produced non-finite voltages")
+        extra = {"r_eq_ohm": r_eq, "solution": sol}
+        return PackSimResult(
+            time_s=t_out,
+            pack_voltage_v=v_pack,
+            pack_current_a=i_pack,
+            min_cell_voltage_v=v_cell,
+            termination=termination,
+            end_time_s=t_sol_end,
+            seconds=time.perf_counter() - tic,
+            extra=extra,
+        )
