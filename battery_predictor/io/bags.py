@@ -61,26 +61,40 @@ Metadata
 ``metadata=`` in the bag's ``custom_data`` (``metadata.yaml`` and the MCAP
 ``rosbag2`` metadata record), one entry per key, the value JSON-encoded.
 Keys starting with ``battery_predictor.`` are reserved: the writer stores the
-style, the source and the time origin there so that ``read_recording_bag``
-returns exactly the time axis that was written (the MCAP stamps are
-``time_origin_ns + round((time_s - time_s[0]) * 1e9)``; a recording whose time
-starts near 0 is anchored at 2024-01-01T00:00:00Z, one whose time already
-looks like epoch seconds keeps it). For bags without these keys (recorded on a
-robot) ``time_s`` is the stamp in epoch seconds.
+style, the source, the time origin and a SHA-256 of every topic's messages
+there. The MCAP stamps are ``time_origin_ns + round((time_s - time_base_s) *
+1e9)``: a recording with a relative time axis (``time_s[0] < 1e8``) uses
+``time_base_s = 0`` and is anchored at 2024-01-01T00:00:00Z, so
+``read_recording_bag`` returns bit-identical times (for times with at most 9
+decimals); one whose time already looks like epoch seconds keeps it (to ~1e-7
+s, the float64 resolution of epoch seconds). For bags without these keys
+(recorded on a robot) ``time_s`` is the stamp in epoch seconds.
 
 Errors
 ------
 Everything raises :class:`~battery_predictor.errors.BagError` (or
 :class:`~battery_predictor.errors.InputDataError` for implausible data) with a
-one-line message naming the path: missing path, not a bag, corrupt or truncated
-storage (detected by ``rosbags``: MCAP magic/footer/record-length/chunk-CRC
-checks, plus any failure while indexing or decoding messages), no supported
+one-line message naming the path: missing path, not a bag, no supported
 topic, a requested topic that is missing or of an unsupported type (the message
-lists the topics and types in the bag).
+lists the topics and types in the bag), and corrupt or truncated storage.
+Corruption is detected in four layers, each turned into ``BagError`` (never a
+raw traceback; every check is a bounded read, nothing can hang):
+
+1. ``rosbags`` while opening: MCAP start/end magic and footer (a truncated
+   file, e.g. a recorder killed mid-write, fails here at once), record
+   lengths, chunk CRCs when the writer stored them, metadata.yaml syntax and
+   referenced files; any exception it raises while indexing or iterating;
+2. CDR decoding of every message that is read;
+3. the number of messages read per topic must equal the count in the bag's
+   index/metadata (a damaged chunk index otherwise silently drops messages);
+4. for bags written here, a SHA-256 of every topic's (log time, payload)
+   stream stored in custom_data (``rosbags`` writes chunks without CRC, so a
+   flipped byte inside a value would otherwise go unnoticed).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -123,6 +137,7 @@ _KEY_STYLE = RESERVED_PREFIX + "style"
 _KEY_SOURCE = RESERVED_PREFIX + "source"
 _KEY_ORIGIN_NS = RESERVED_PREFIX + "time_origin_ns"
 _KEY_BASE_S = RESERVED_PREFIX + "time_base_s"
+_KEY_SHA256 = RESERVED_PREFIX + "sha256"
 
 #: Where recordings with a relative time axis are anchored (2024-01-01T00:00:00Z).
 DEFAULT_START_NS = 1_704_067_200 * 1_000_000_000
@@ -227,7 +242,11 @@ def write_recording_bag(
         if bad.any():
             k = int(np.argmax(bad))
             raise BagError(f"{p}: recording {recording.source}: sample {k} has non-finite {name} ({arr[k]!r})")
-    t_base = float(t[0])
+    # Relative time axes (the usual case) are stored as DEFAULT_START_NS + round(time_s * 1e9), so that
+    # (stamp - origin) / 1e9 gives back exactly the same float for times with <= 9 decimals; epoch times
+    # keep their whole seconds in the origin.
+    t_base = float(math.floor(t[0])) if t[0] >= _EPOCH_THRESHOLD_S else 0.0
+    origin_ns = int(t_base) * 1_000_000_000 if t_base else DEFAULT_START_NS
     rel_ns = np.rint((t - t_base) * 1e9).astype(np.int64)
     if n > 1 and (np.diff(rel_ns) <= 0).any():
         k = int(np.argmax(np.diff(rel_ns) <= 0)) + 1
@@ -235,8 +254,9 @@ def write_recording_bag(
             f"{p}: recording {recording.source}: time_s must be strictly increasing (by >= 1 ns), "
             f"sample {k} has {t[k]!r} after {t[k - 1]!r}"
         )
-    origin_ns = int(round(t_base * 1e9)) if t_base >= _EPOCH_THRESHOLD_S else DEFAULT_START_NS
     stamps = origin_ns + rel_ns
+    if stamps[0] < 0:
+        raise BagError(f"{p}: recording {recording.source}: time_s starts at {t[0]!r} s, too far before 2024-01-01")
 
     meta = {**recording.metadata, **(metadata or {})}
     custom: dict[str, str] = {}
@@ -273,11 +293,13 @@ def write_recording_bag(
         writer.open()
     except (OSError, WriterError) as exc:
         raise BagError(f"{p}: cannot create bag ({_one_line(exc)})") from None
+    digests = _DigestingWriter(writer)
     try:
         if style == "battery_state":
-            _write_battery_state(writer, ts, prefix, stamps, v, i, temp_k, meta)
+            _write_battery_state(digests, ts, prefix, stamps, v, i, temp_k, meta)
         else:
-            _write_relay(writer, ts, prefix, stamps, v, i, temp_k)
+            _write_relay(digests, ts, prefix, stamps, v, i, temp_k)
+        writer.set_custom_data(_KEY_SHA256, json.dumps(digests.hexdigests(), sort_keys=True))
         writer.close()
     except BaseException as exc:
         # never leave a half-written bag behind: it would read as corrupt later
@@ -288,6 +310,36 @@ def write_recording_bag(
             raise BagError(f"{p}: cannot write bag ({_one_line(exc)})") from None
         raise
     return p
+
+
+def _digest_update(h, log_ns: int, raw: bytes | memoryview) -> None:
+    h.update(int(log_ns).to_bytes(8, "little", signed=False))
+    h.update(len(raw).to_bytes(8, "little"))
+    h.update(raw)
+
+
+class _DigestingWriter:
+    """Forwards to a rosbags Writer and keeps a SHA-256 of every topic's (log time, payload) stream.
+
+    rosbags writes MCAP chunks without CRC, so without this a flipped byte in
+    a message would go unnoticed; the digests go to custom_data and are
+    verified by :func:`read_recording_bag`.
+    """
+
+    def __init__(self, writer):
+        self._writer = writer
+        self._hashes: dict[str, Any] = {}
+
+    def add_connection(self, topic: str, msgtype: str, **kwargs):
+        self._hashes[topic] = hashlib.sha256()
+        return self._writer.add_connection(topic, msgtype, **kwargs)
+
+    def write(self, conn, ns: int, raw: bytes | memoryview) -> None:
+        _digest_update(self._hashes[conn.topic], ns, raw)
+        self._writer.write(conn, ns, raw)
+
+    def hexdigests(self) -> dict[str, str]:
+        return {topic: h.hexdigest() for topic, h in self._hashes.items()}
 
 
 def _stamp(ts, ns: int):
@@ -522,13 +574,15 @@ def _select(p: Path, topics: dict[str, tuple[str, int]], topic: str | None) -> t
 # ---------------------------------------------------------------------------
 
 
-def _messages(p: Path, reader, topic_names: set[str]) -> dict[str, list[tuple[int, Any]]]:
-    """Deserialised messages per topic as (log_time_ns, msg)."""
+def _messages(p: Path, reader, topic_names: set[str], custom: dict[str, str]) -> dict[str, list[tuple[int, Any]]]:
+    """Deserialised messages per topic as (log_time_ns, msg), verified against the bag's counts and digests."""
     ts = _typestore()
     conns = [c for c in reader.connections if c.topic in topic_names]
     out: dict[str, list[tuple[int, Any]]] = {name: [] for name in topic_names}
+    hashes = {name: hashlib.sha256() for name in topic_names}
     try:
         for conn, log_ns, raw in reader.messages(connections=conns):
+            _digest_update(hashes[conn.topic], log_ns, raw)
             try:
                 msg = ts.deserialize_cdr(raw, conn.msgtype)
             except Exception as exc:  # noqa: BLE001
@@ -541,6 +595,23 @@ def _messages(p: Path, reader, topic_names: set[str]) -> dict[str, list[tuple[in
         raise
     except Exception as exc:  # noqa: BLE001 - rosbags raises many types on corrupt input
         raise _corrupt(p, exc) from None
+    expected: dict[str, int] = {}
+    for conn in conns:
+        expected[conn.topic] = expected.get(conn.topic, 0) + int(conn.msgcount)
+    for name in sorted(topic_names):
+        if expected.get(name, 0) != len(out[name]):
+            raise BagError(
+                f"{p}: corrupt or truncated bag: the index lists {expected.get(name, 0)} messages on {name}, "
+                f"{len(out[name])} could be read"
+            )
+    try:
+        stored = json.loads(custom.get(_KEY_SHA256, "{}"))
+    except ValueError:
+        stored = {}
+    for name in sorted(topic_names):
+        want = stored.get(name) if isinstance(stored, dict) else None
+        if want is not None and want != hashes[name].hexdigest():
+            raise BagError(f"{p}: corrupt bag: the messages on {name} do not match the SHA-256 stored when it was written")
     return out
 
 
@@ -609,7 +680,7 @@ def read_recording_bag(
         topics = _topics(reader)
         style, name = _select(src, topics, topic)
         if style == "battery_state":
-            msgs = _messages(src, reader, {name})[name]
+            msgs = _messages(src, reader, {name}, custom)[name]
             if not msgs:
                 raise BagError(f"{src}: topic {name} has no messages")
             ns = np.array([_stamp_ns(log, m.header) for log, m in msgs], dtype=np.int64)
@@ -621,7 +692,7 @@ def read_recording_bag(
             where = name
         else:
             names = {name + s for s in RELAY_SUFFIXES.values() if name + s in topics}
-            got = _messages(src, reader, names)
+            got = _messages(src, reader, names, custom)
             ns, v, i, temp_c, extra = _merge_relay(src, name, got)
             where = name + "/*"
     source = str(src)

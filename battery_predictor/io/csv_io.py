@@ -28,8 +28,9 @@ Checks
 ------
 Every problem raises :class:`~battery_predictor.errors.InputDataError` with a
 one-line message that names the file and either the column or the **CSV line
-number** (the header is line 1; the data row number, counting the first data
-line as row 1, is given in parentheses):
+number** (physical lines of the file, so the header is line 1 unless comment
+lines precede it), followed by the 1-based data row number in parentheses,
+e.g. ``data.csv: line 3 (data row 2): ...``:
 
 * file missing, a directory, not UTF-8, empty, or header without data rows;
 * a required column missing (the message lists the columns found);
@@ -299,8 +300,7 @@ def check_current_sign(time_s: np.ndarray, voltage_v: np.ndarray, current_a: np.
     i_max = float(np.max(np.abs(i)))
     if i_max <= 0.0:
         return
-    trapezoid = getattr(np, "trapezoid", None) or np.trapz
-    charge_ah = float(trapezoid(i, t)) / 3600.0
+    charge_ah = float(np.sum(0.5 * (i[1:] + i[:-1]) * np.diff(t))) / 3600.0  # trapezoidal
     nonzero = i[np.abs(i) > 0.01 * i_max]
     negative_fraction = float(np.mean(nonzero < 0.0)) if len(nonzero) else 0.0
     score = voltage_response_score(v, i)
@@ -385,7 +385,6 @@ def _build(
     metadata: dict[str, Any],
 ) -> Recording:
     """Validate one record (the table rows ``row_idx``, 0-based) and make a Recording."""
-    path = table.path
     rows = row_idx + 1  # 1-based data row numbers
     t = columns["time_s"][row_idx]
     v = columns["voltage_V"][row_idx]
@@ -428,8 +427,8 @@ def _build(
         k = int(np.argmax(dt <= 0)) + 1 if duplicate_times == "error" else int(np.argmax(dt < 0)) + 1
         prev_line = table.lines[rows[k - 1] - 1]
         if t[k] == t[k - 1]:
-            hint = ("repeated timestamp (common at step changes in cycler exports): pass duplicate_times='keep_last' "
-                    "to keep the last row of each repeated time")
+            hint = ("repeated timestamp, common at step changes in cycler exports: duplicate_times='keep_last' "
+                    "(CLI: --duplicate-times keep_last) keeps the last row of each repeated time")
         else:
             hint = "time goes backwards"
             group_like = [c for c in ("soc_label", "cell", "cycle", "step", "test", "record", "run") if c in table.index]

@@ -30,12 +30,16 @@ class LiionpackSimulator:
     ----------
     period_s : float or None
         Step period in s; None uses the load's shortest step (at least 1 s).
+    output_variables : tuple of str
+        Extra per-cell PyBaMM variables to record (e.g. ``"Volume-averaged cell temperature [K]"``);
+        returned in ``result.extra["variables"][name]`` as arrays of shape (steps, cells).
     """
 
     name = "liionpack"
 
-    def __init__(self, period_s: float | None = None) -> None:
+    def __init__(self, period_s: float | None = None, output_variables: tuple[str, ...] = ()) -> None:
         self.period_s = period_s
+        self.output_variables = tuple(output_variables)
 
     def simulate(self, params, request: SimulationRequest) -> PackSimResult:
         """Simulate ``request`` on the pack ``params``; see :class:`PackSimulator`."""
@@ -84,13 +88,14 @@ class LiionpackSimulator:
         try:
             with quiet_pybamm():
                 out = lp.solve(netlist=netlist, sim_func=sim_func, parameter_values=pv, experiment=experiment,
-                               inputs=inputs, initial_soc=None, nproc=1, manager="casadi")
+                               inputs=inputs, initial_soc=None, nproc=1, manager="casadi",
+                               output_variables=list(self.output_variables) or None)
         except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError, KeyError) as exc:
             raise SimulationError(f"liionpack simulation failed: {str(exc).splitlines()[0]}") from None
-        return self._result(params, request, stepped, out, tic)
+        return self._result(params, request, stepped, out, tic, self.output_variables)
 
     @staticmethod
-    def _result(params, request, stepped, out, tic) -> PackSimResult:
+    def _result(params, request, stepped, out, tic, output_variables=()) -> PackSimResult:
         t_steps = np.asarray(out["Time [s]"], dtype=float)
         if t_steps.size == 0:
             raise SimulationError("liionpack simulation produced no steps")
@@ -114,5 +119,6 @@ class LiionpackSimulator:
             seconds=time.perf_counter() - tic,
             extra={"cell_voltage_v": cell_v, "cell_current_a": np.asarray(out["Cell current [A]"]),
                    "step_time_s": t_steps, "period_s": float(stepped.start_s[1] - stepped.start_s[0])
-                   if len(stepped.start_s) > 1 else float(stepped.end_s)},
+                   if len(stepped.start_s) > 1 else float(stepped.end_s),
+                   "variables": {name: np.asarray(out[name]) for name in output_variables}},
         )

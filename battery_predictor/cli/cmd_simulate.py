@@ -1,0 +1,72 @@
+"""``battery-predictor simulate``: drive a pack model with measured current and score it."""
+
+from __future__ import annotations
+
+import time
+
+from battery_predictor.cli.common import add_data_arguments, load_data, print_json
+
+
+def register(sub) -> None:
+    p = sub.add_parser("simulate", help="score a params file on measured data (R2_mod, RMSE, runtime)")
+    p.add_argument("--params", required=True, help="params YAML (e.g. the output of fit)")
+    add_data_arguments(p)
+    p.add_argument("--simulator", choices=("fast", "liionpack"), default="fast")
+    p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto",
+                   help="initial state: params' concentrations or first measured voltage (default auto)")
+    p.add_argument("--plot", default=None, help="write measured vs simulated voltage to this PNG")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from battery_predictor.fitting.cost import r2_mod, rmse_v
+    from battery_predictor.fitting.problem import request_for_recording
+    from battery_predictor.params import load_params
+    from battery_predictor.simulation import get_simulator
+
+    tic = time.perf_counter()
+    params = load_params(args.params)
+    recs = load_data(args.data, trim=not args.no_trim)
+    sim = get_simulator(args.simulator)
+    rows, results = [], []
+    for rec in recs:
+        req = request_for_recording(params, rec, initial_state=args.initial_state, extend_s=0.5 * rec.duration_s)
+        res = sim.simulate(params, req)
+        t = rec.relative_time_s
+        u_end = float(rec.voltage_v.min())
+        t_sim = res.time_to_pack_voltage_s(u_end)
+        if t_sim is None and res.reached_cutoff:
+            t_sim = res.end_time_s
+        rows.append({
+            "data": str(rec.source),
+            "r2_mod": r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v),
+            "rmse_mV": 1e3 * rmse_v(t, rec.voltage_v, res.time_s, res.pack_voltage_v),
+            "runtime_s_measured": float(rec.duration_s),
+            "runtime_s_simulated": t_sim,
+        })
+        results.append(res)
+    out = dict(rows[0]) if len(rows) == 1 else {
+        "r2_mod": sum(r["r2_mod"] for r in rows) / len(rows),
+        "rmse_mV": sum(r["rmse_mV"] for r in rows) / len(rows),
+        "runtime_s_measured": rows[0]["runtime_s_measured"],
+        "runtime_s_simulated": rows[0]["runtime_s_simulated"],
+        "per_file": rows,
+    }
+    out.pop("data", None)
+    out["seconds"] = time.perf_counter() - tic
+    out["simulator"] = args.simulator
+    if args.plot:
+        from battery_predictor.plots import plot_voltage_fit
+
+        plot_voltage_fit(recs, results, args.plot, title=f"{params.name}: R2_mod = {out['r2_mod']:.4f}")
+    if args.json:
+        print_json(out)
+        return 0
+    for r in rows:
+        ts = r["runtime_s_simulated"]
+        print(f"{r['data']}: R2_mod {r['r2_mod']:.4f}, RMSE {r['rmse_mV']:.1f} mV, runtime measured "
+              f"{r['runtime_s_measured'] / 60:.1f} min, simulated "
+              f"{'n/a' if ts is None else f'{ts / 60:.1f} min'}")
+    print(f"({args.simulator} simulator, {out['seconds']:.1f} s)")
+    return 0

@@ -1,0 +1,211 @@
+"""Seeded tree-structured Parzen estimator (Optuna ``TPESampler``) over a fit problem.
+
+Studies live in an Optuna RDB storage (SQLite file by default, any Optuna storage
+URL such as PostgreSQL otherwise), so several processes can work on one study and
+a stopped fit resumes where it stopped. A failing simulation is recorded as a
+failed trial and never stops the fit.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import multiprocessing
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from battery_predictor.errors import BatteryPredictorError, SimulationError
+from battery_predictor.fitting.problem import FitProblem
+from battery_predictor.fitting.space import FitParameter
+
+#: Startup (random) trials per searched parameter, as in the seed paper.
+STARTUP_TRIALS_PER_PARAMETER = 20
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Outcome of a fit.
+
+    Attributes
+    ----------
+    best_values : dict
+        Best parameter values found (in each key's unit).
+    best_r2_mod : float
+        R2_mod of the best trial.
+    trials : int
+        Finished trials in the study (complete + failed).
+    failed_trials : int
+        Trials whose simulation failed.
+    seconds : float
+        Wall time of this run in s.
+    study_name, storage : str
+        Where the study is stored.
+    """
+
+    best_values: dict[str, float]
+    best_r2_mod: float
+    trials: int
+    failed_trials: int
+    seconds: float
+    study_name: str
+    storage: str
+
+
+def study_name_for(problem: FitProblem, space: Sequence[FitParameter]) -> str:
+    """A study name that identifies the params, the data and the searched space."""
+    h = hashlib.sha1()
+    h.update(repr(sorted(problem.params.cell_values.items())).encode())
+    h.update(repr(sorted(problem.params.interconnect.items())).encode())
+    for rec in problem.recordings:
+        h.update(rec.time_s.tobytes())
+        h.update(rec.voltage_v.tobytes())
+    h.update(repr([(p.name, p.low, p.high, p.log) for p in space]).encode())
+    return f"{problem.params.name}-{h.hexdigest()[:12]}"
+
+
+def _objective_factory(problem: FitProblem, space: Sequence[FitParameter]):
+    def objective(trial) -> float:
+        values = {p.name: trial.suggest_float(p.name, p.low, p.high, log=p.log) for p in space}
+        try:
+            ev = problem.evaluate(values)
+        except BatteryPredictorError as exc:
+            trial.set_user_attr("error", str(exc)[:300])
+            raise SimulationError(str(exc)) from None
+        if not math.isfinite(ev.r2_mod):
+            trial.set_user_attr("error", "non-finite R2_mod")
+            raise SimulationError("non-finite R2_mod")
+        trial.set_user_attr("rmse_mv", [float(x) for x in ev.rmse_mv])
+        return ev.r2_mod
+
+    return objective
+
+
+def _worker(storage: str, study_name: str, problem: FitProblem, space, seed: int, n_startup: int,
+            n_trials_total: int) -> None:
+    """Child-process worker: runs trials until the study holds ``n_trials_total``."""
+    import optuna
+    from optuna.trial import TrialState
+
+    optuna.logging.set_verbosity(optuna.logging.ERROR)
+    sampler = optuna.samplers.TPESampler(seed=seed, n_startup_trials=n_startup)
+    study = optuna.load_study(study_name=study_name, storage=storage, sampler=sampler)
+
+    def stop_when_done(study, _trial) -> None:
+        states = (TrialState.COMPLETE, TrialState.FAIL)
+        if len(study.get_trials(deepcopy=False, states=states)) >= n_trials_total:
+            study.stop()
+
+    study.optimize(_objective_factory(problem, space), n_trials=n_trials_total, catch=(SimulationError,),
+                   callbacks=[stop_when_done])
+
+
+class TPEOptimiser:
+    """Seeded Optuna TPE.
+
+    Parameters
+    ----------
+    n_trials : int
+        Total trials of the study (a resumed study runs only the missing ones).
+    seed : int
+        Sampler seed (worker ``k`` uses ``seed + k``).
+    storage : str or None
+        Optuna storage URL (``sqlite:///fit.db``, ``postgresql://...``); None = in memory.
+    study_name : str or None
+        Default: derived from params, data and space.
+    workers : int
+        Processes working on the study (needs an RDB storage when > 1).
+    progress : bool
+        Show a progress bar (trials, best R2_mod, ETA) on stderr.
+    """
+
+    def __init__(self, n_trials: int = 1000, seed: int = 0, storage: str | None = None,
+                 study_name: str | None = None, workers: int = 1, progress: bool = True) -> None:
+        if n_trials < 1:
+            raise BatteryPredictorError(f"--trials must be >= 1, got {n_trials}")
+        if workers < 1:
+            raise BatteryPredictorError(f"--workers must be >= 1, got {workers}")
+        if workers > 1 and storage is None:
+            raise BatteryPredictorError("several workers need an RDB storage (--storage sqlite:///...)")
+        self.n_trials = n_trials
+        self.seed = seed
+        self.storage = storage
+        self.study_name = study_name
+        self.workers = workers
+        self.progress = progress
+
+    def run(self, problem: FitProblem, space: Sequence[FitParameter]) -> FitResult:
+        """Run (or resume) the study and return the best values."""
+        import optuna
+        from optuna.trial import TrialState
+
+        optuna.logging.set_verbosity(optuna.logging.ERROR)
+        tic = time.perf_counter()
+        n_startup = STARTUP_TRIALS_PER_PARAMETER * len(space)
+        name = self.study_name or study_name_for(problem, space)
+        sampler = optuna.samplers.TPESampler(seed=self.seed, n_startup_trials=n_startup)
+        try:
+            study = optuna.create_study(study_name=name, storage=self.storage, sampler=sampler,
+                                        direction="maximize", load_if_exists=True)
+        except Exception as exc:  # storage URL unreachable, bad scheme...
+            raise BatteryPredictorError(f"cannot open Optuna storage {self.storage!r}: {exc}") from None
+        finished_states = (TrialState.COMPLETE, TrialState.FAIL)
+        done = len(study.get_trials(deepcopy=False, states=finished_states))
+        if done == 0 and not study.get_trials(deepcopy=False):
+            study.enqueue_trial({p.name: min(max(p.initial, p.low), p.high) for p in space})
+        remaining = self.n_trials - done
+        bar = None
+        if self.progress and remaining > 0:
+            from tqdm import tqdm
+
+            bar = tqdm(total=self.n_trials, initial=done, desc="fit", unit="trial", file=sys.stderr,
+                       dynamic_ncols=True)
+
+        def on_trial(study, _trial) -> None:
+            n = len(study.get_trials(deepcopy=False, states=finished_states))
+            if bar is not None:
+                bar.n = min(n, self.n_trials)
+                try:
+                    bar.set_postfix_str(f"best R2_mod={study.best_value:.4f}", refresh=False)
+                except ValueError:
+                    pass
+                bar.refresh()
+            if n >= self.n_trials:
+                study.stop()
+
+        procs = []
+        if remaining > 0:
+            if self.workers > 1:
+                ctx = multiprocessing.get_context("fork")
+                for k in range(1, self.workers):
+                    proc = ctx.Process(target=_worker, args=(self.storage, name, problem, space, self.seed + k,
+                                                             n_startup, self.n_trials), daemon=True)
+                    proc.start()
+                    procs.append(proc)
+            try:
+                study.optimize(_objective_factory(problem, space), n_trials=remaining, catch=(SimulationError,),
+                               callbacks=[on_trial])
+            finally:
+                for proc in procs:
+                    proc.join(timeout=600)
+                    if proc.is_alive():
+                        proc.terminate()
+                if bar is not None:
+                    bar.close()
+        trials = study.get_trials(deepcopy=False)
+        complete = [t for t in trials if t.state == TrialState.COMPLETE]
+        failed = [t for t in trials if t.state == TrialState.FAIL]
+        if not complete:
+            reasons = {t.user_attrs.get("error", "?") for t in failed[:5]}
+            raise SimulationError(f"every trial failed ({len(failed)}); e.g. {'; '.join(sorted(reasons))}")
+        best = study.best_trial
+        return FitResult(
+            best_values={k: float(v) for k, v in best.params.items()},
+            best_r2_mod=float(best.value),
+            trials=len(complete) + len(failed),
+            failed_trials=len(failed),
+            seconds=time.perf_counter() - tic,
+            study_name=name,
+            storage=self.storage or "memory",
+        )

@@ -1,0 +1,139 @@
+"""A fit problem: recordings, a pack model and a simulator, scored with R2_mod."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from battery_predictor.errors import InputDataError, SimulationError
+from battery_predictor.fitting.cost import r2_mod, rmse_v
+from battery_predictor.params import PackParams
+from battery_predictor.recording import Recording
+from battery_predictor.simulation.base import PackSimResult, PackSimulator, SimulationRequest
+from battery_predictor.simulation.load import StepLoad
+
+#: Below this |current| / nominal capacity (1/h) a recording is taken to start at rest.
+_REST_C_RATE = 0.02
+
+
+def trim_to_discharge(rec: Recording) -> Recording:
+    """The recording up to (and including) its minimum voltage: the end of the discharge.
+
+    Rests and recharges after the end of discharge are dropped, since the model
+    is terminated at the cut-off as the experiment was.
+    """
+    if len(rec.time_s) < 3:
+        raise InputDataError(f"{rec.source}: too few samples ({len(rec.time_s)}) to simulate")
+    i_min = int(np.argmin(rec.voltage_v))
+    if i_min < 2:
+        raise InputDataError(f"{rec.source}: the minimum voltage is at the start; no discharge to fit")
+    return rec.slice_time(rec.time_s[0], rec.time_s[i_min])
+
+
+def request_for_recording(params: PackParams, rec: Recording, *, initial_state: str = "auto",
+                          extend_s: float = 0.0) -> SimulationRequest:
+    """Simulation request that drives the model with a recording's current and temperature.
+
+    Parameters
+    ----------
+    initial_state : {"auto", "params", "voltage"}
+        ``"params"``: the params' initial concentrations; ``"voltage"``: the first measured
+        voltage taken as pack open-circuit voltage (valid when the recording starts at rest);
+        ``"auto"``: ``"params"`` when initial concentrations are fitted or the recording does not
+        start at rest, else ``"voltage"``.
+    extend_s : float
+        Continue past the recording for this many seconds at the recording's mean current, so
+        that a model which would end later than the measurement shows it (R2_mod's late case).
+    """
+    load = StepLoad.from_samples(rec.time_s, rec.current_a)
+    if extend_s > 0:
+        load = load.append(StepLoad.constant(max(load.mean_current_a(), 0.0), extend_s))
+    if initial_state == "auto":
+        capacity_ah = float(params.pack_info.get("nominal_capacity_ah", 0.0)) or 1.0
+        at_rest = abs(float(rec.current_a[0])) / capacity_ah < _REST_C_RATE
+        fits_initial = any(p.startswith("Initial concentration") for p in params.fit.parameters)
+        initial_state = "voltage" if at_rest and not fits_initial else "params"
+    ocv = float(rec.voltage_v[0]) if initial_state == "voltage" else None
+    out_t = rec.relative_time_s
+    if extend_s > 0:
+        dt = float(np.median(np.diff(out_t)))
+        out_t = np.concatenate([out_t, np.arange(out_t[-1] + dt, load.end_s, dt)])
+    return SimulationRequest(load=load, ambient_temperature_k=rec.mean_temperature_k(params.ambient_temperature_k),
+                             initial_pack_ocv_v=ocv, output_time_s=out_t)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Score of one candidate on every recording.
+
+    Attributes
+    ----------
+    r2_mod : float
+        Mean R2_mod over the recordings.
+    per_recording : list of float
+        R2_mod of each recording.
+    rmse_mv : list of float
+        RMS voltage error (mV) of each recording over the simulated span.
+    results : list of PackSimResult
+        The simulations.
+    """
+
+    r2_mod: float
+    per_recording: list[float]
+    rmse_mv: list[float]
+    results: list[PackSimResult] = field(repr=False)
+
+
+@dataclass
+class FitProblem:
+    """Recordings + base params + simulator; scores candidate parameter values.
+
+    Parameters
+    ----------
+    params : PackParams
+        The starting model.
+    recordings : sequence of Recording
+        Measured discharges (trimmed to the discharge by the caller if wanted).
+    simulator : PackSimulator
+        Fast or liionpack.
+    initial_state : str
+        See :func:`request_for_recording`.
+    """
+
+    params: PackParams
+    recordings: Sequence[Recording]
+    simulator: PackSimulator
+    initial_state: str = "auto"
+    extend_fraction: float = 0.2
+
+    def __post_init__(self) -> None:
+        if not self.recordings:
+            raise InputDataError("no data to fit")
+
+    def candidate(self, values: Mapping[str, float]) -> PackParams:
+        """The params with ``values`` substituted."""
+        return self.params.with_values(values)
+
+    def evaluate(self, values: Mapping[str, float] | None = None) -> Evaluation:
+        """Simulate every recording with ``values`` and score it.
+
+        Raises
+        ------
+        SimulationError
+            When any simulation fails (a fit records it as a failed trial).
+        """
+        params = self.candidate(values or {})
+        scores, errors, results = [], [], []
+        for rec in self.recordings:
+            req = request_for_recording(params, rec, initial_state=self.initial_state,
+                                        extend_s=self.extend_fraction * rec.duration_s)
+            res = self.simulator.simulate(params, req)
+            if res.time_s.size < 2:
+                raise SimulationError(f"{rec.source}: simulation ended immediately (cut-off at start)")
+            t = rec.relative_time_s
+            scores.append(r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v))
+            errors.append(1e3 * rmse_v(t, rec.voltage_v, res.time_s, res.pack_voltage_v))
+            results.append(res)
+        return Evaluation(r2_mod=float(np.mean(scores)), per_recording=scores, rmse_mv=errors, results=results)
