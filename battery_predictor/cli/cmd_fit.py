@@ -38,7 +38,7 @@ def run(args) -> int:
     from battery_predictor.simulation import get_simulator
 
     params = load_params(args.params)
-    recs = load_data(args.data, trim=not args.no_trim)
+    recs = load_data(args.data, trim=not args.no_trim, duplicate_times=args.duplicate_times)
     out = Path(args.out)
     storage = args.storage or f"sqlite:///{out.with_suffix('.optuna.db').resolve()}"
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -27,7 +27,7 @@ def run(args) -> int:
 
     tic = time.perf_counter()
     params = load_params(args.params)
-    recs = load_data(args.data, trim=not args.no_trim)
+    recs = load_data(args.data, trim=not args.no_trim, duplicate_times=args.duplicate_times)
     sim = get_simulator(args.simulator)
     rows, results = [], []
     for rec in recs:

@@ -11,12 +11,12 @@ from typing import Any
 from battery_predictor.recording import Recording
 
 
-def load_data(paths: Sequence[str], *, trim: bool = True) -> list[Recording]:
+def load_data(paths: Sequence[str], *, trim: bool = True, duplicate_times: str = "error") -> list[Recording]:
     """Load recordings (CSV or bag); trimmed to their discharge unless ``trim`` is False."""
     from battery_predictor.fitting.problem import trim_to_discharge
     from battery_predictor.io.loader import load_recording
 
-    recs = [load_recording(p) for p in paths]
+    recs = [load_recording(p, duplicate_times=duplicate_times) for p in paths]
     return [trim_to_discharge(r) for r in recs] if trim else recs
 
 
@@ -42,3 +42,5 @@ def add_data_arguments(parser) -> None:
                         help="CSV (time_s, voltage_V, current_A > 0 = discharge[, temperature_C]) or rosbag2 MCAP")
     parser.add_argument("--no-trim", action="store_true",
                         help="keep samples after the minimum voltage (rests, recharge)")
+    parser.add_argument("--duplicate-times", choices=("error", "keep_first", "keep_last"), default="error",
+                        help="CSV rows that repeat a timestamp: reject (default) or keep one")
