@@ -47,6 +47,20 @@ def _base_keys(base_parameter_set: str) -> frozenset[str]:
     return frozenset(pybamm.ParameterValues(base_parameter_set).keys())
 
 
+@functools.lru_cache(maxsize=1)
+def _all_pybamm_keys() -> frozenset[str]:
+    """Every parameter name of every PyBaMM parameter set (keys a cell may add to its base set)."""
+    import pybamm
+
+    keys: set[str] = set()
+    for name in pybamm.parameter_sets:
+        try:
+            keys |= set(pybamm.ParameterValues(name).keys())
+        except Exception:  # noqa: BLE001 - a broken third-party set must not break validation
+            continue
+    return frozenset(keys)
+
+
 def _strip_unit(key: str) -> str:
     m = _UNIT_BRACKET.match(key)
     return m.group("name") if m else key.strip()
@@ -66,7 +80,9 @@ def check_pybamm_key(key: str, base_parameter_set: str, source: str, extra_allow
     extra_allowed : frozenset of str
         Keys that are valid although the base set lacks them (model-option parameters).
     """
-    keys = _base_keys(base_parameter_set) | extra_allowed
+    if key in _base_keys(base_parameter_set) or key in extra_allowed:
+        return
+    keys = _base_keys(base_parameter_set) | extra_allowed | _all_pybamm_keys()
     if key in keys:
         return
     bare = _strip_unit(key)
@@ -75,7 +91,7 @@ def check_pybamm_key(key: str, base_parameter_set: str, source: str, extra_allow
         if "[" not in key:
             raise ParamsError(f"{source}: key '{key}': missing unit, use '{same_name[0]}'")
         raise ParamsError(f"{source}: key '{key}': wrong unit, {base_parameter_set} defines '{same_name[0]}'")
-    raise ParamsError(f"{source}: unknown key '{key}': not a parameter of PyBaMM set {base_parameter_set}")
+    raise ParamsError(f"{source}: unknown key '{key}': not a PyBaMM parameter (base set {base_parameter_set})")
 
 
 def _check_unit_suffix(key: str, source: str, section: str) -> None:
@@ -349,8 +365,9 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
                                   f"{', '.join(INTERCONNECT_KEYS)})")
             raise ParamsError(f"{source}: unknown key 'interconnect.{key}' (allowed: {', '.join(INTERCONNECT_KEYS)})")
         v = _as_float(val, source, f"interconnect.{key}")
-        if v < 0:
-            raise ParamsError(f"{source}: key 'interconnect.{key}': resistance must be >= 0, got {v}")
+        if v <= 0:
+            raise ParamsError(f"{source}: key 'interconnect.{key}': resistance must be > 0 (liionpack's netlist "
+                              f"needs a conductance), got {v}")
         interconnect[key] = v
 
     thresholds = _unit_scalars(_section(data, "thresholds", source, required=False), "thresholds", source)

@@ -29,7 +29,7 @@ class SimulationRequest:
     initial_pack_ocv_v : float or None
         Initial pack open-circuit voltage in V (divided by the series count).
     output_time_s : numpy.ndarray or None
-        Times (s from the load start) to report; None reports every step start.
+        Times (s from the load start) to report; None reports every step start and at least every 10 s.
     cell_inputs : dict or None
         Per-cell values ``{pybamm_key: array of n_cells}`` for heterogeneous
         packs (liionpack only).
@@ -42,11 +42,12 @@ class SimulationRequest:
     output_time_s: np.ndarray | None = None
     cell_inputs: dict[str, np.ndarray] | None = None
 
-    def output_times(self) -> np.ndarray:
-        """Report times in s."""
+    def output_times(self, max_spacing_s: float = 10.0) -> np.ndarray:
+        """Report times in s: ``output_time_s``, or every step start plus a grid of ``max_spacing_s``."""
         if self.output_time_s is not None:
             return np.asarray(self.output_time_s, dtype=float)
-        return self.load.start_s.copy()
+        grid = np.arange(0.0, self.load.end_s, max_spacing_s)
+        return np.union1d(self.load.start_s, grid)
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,8 @@ class LiionpackSimulator:
     Parameters
     ----------
     period_s : float or None
-        Step period in s; None uses the load's shortest step (at least 1 s).
+        Step period in s (default 10 s; the load is resampled conserving charge); None uses the
+        load's shortest step (at least 1 s).
     output_variables : tuple of str
         Extra per-cell PyBaMM variables to record (e.g. ``"Volume-averaged cell temperature [K]"``);
         returned in ``result.extra["variables"][name]`` as arrays of shape (steps, cells).
@@ -37,7 +38,7 @@ class LiionpackSimulator:
 
     name = "liionpack"
 
-    def __init__(self, period_s: float | None = None, output_variables: tuple[str, ...] = ()) -> None:
+    def __init__(self, period_s: float | None = 10.0, output_variables: tuple[str, ...] = ()) -> None:
         self.period_s = period_s
         self.output_variables = tuple(output_variables)
 

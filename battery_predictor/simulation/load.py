@@ -113,9 +113,9 @@ class StepLoad:
         n = int(np.ceil(self.end_s / period_s - 1e-9))
         grid = np.arange(n + 1) * period_s
         grid[-1] = max(grid[-1], self.end_s)
-        cum = self.cumulative_charge_as(grid)
+        cum = self.cumulative_charge_as(np.minimum(grid, self.end_s))
         cur = np.diff(cum) / np.diff(grid)
-        # the tail beyond end_s continues the last current
+        # a last period reaching past end_s carries the remaining charge spread over the period
         return StepLoad(grid[:-1], cur, float(grid[-1]))
 
     def cumulative_charge_as(self, time_s) -> np.ndarray:

@@ -1,0 +1,111 @@
+"""TPE fitting: recovers a liionpack-made pack, records failures, resumes, is seeded."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from battery_predictor.errors import SimulationError
+from battery_predictor.fitting.cost import r2_mod
+from battery_predictor.fitting.optimiser import STARTUP_TRIALS_PER_PARAMETER, TPEOptimiser
+from battery_predictor.fitting.problem import FitProblem, request_for_recording
+from battery_predictor.fitting.space import fit_space
+from battery_predictor.recording import Recording
+from battery_predictor.simulation import PackSimResult, get_simulator
+
+
+@pytest.mark.slow
+def test_fit_on_liionpack_data_reaches_r2_099_on_held_out_profile(temi_params, synthetic_temi):
+    truth_values, _, train, held_out = synthetic_temi
+    names = tuple(truth_values)
+    problem = FitProblem(temi_params, [train], get_simulator("fast"), initial_state="params")
+    result = TPEOptimiser(n_trials=90, seed=1, progress=False).run(problem, fit_space(temi_params, names))
+    fitted = temi_params.with_values(result.best_values)
+    res = get_simulator("fast").simulate(fitted, request_for_recording(fitted, held_out, initial_state="params",
+                                                                       extend_s=0.2 * held_out.duration_s))
+    score = r2_mod(held_out.relative_time_s, held_out.voltage_v, res.time_s, res.pack_voltage_v)
+    start = get_simulator("fast").simulate(temi_params, request_for_recording(temi_params, held_out,
+                                                                              initial_state="params"))
+    start_score = r2_mod(held_out.relative_time_s, held_out.voltage_v, start.time_s, start.pack_voltage_v)
+    assert start_score < 0.97  # the starting model is clearly wrong on this data
+    assert score >= 0.99
+
+
+@dataclass
+class _LinearSimulator:
+    """Stand-in simulator: V = 4 - slope * t / 3600 with slope = 'Electrode height [m]'; fails above a limit."""
+
+    fail_above: float = np.inf
+    name: str = "linear"
+
+    def simulate(self, params, request) -> PackSimResult:
+        slope = params.value("Electrode height [m]")
+        if slope > self.fail_above:
+            raise SimulationError("solver failed (test)")
+        t = request.output_times()
+        v = 4.0 - slope * t / 3600.0
+        return PackSimResult(t, v, np.ones_like(t), v, "end_of_load", float(t[-1]))
+
+
+def _linear_problem(temi_params, fail_above=np.inf) -> FitProblem:
+    t = np.arange(0.0, 3600.0, 30.0)
+    rec = Recording(t, 4.0 - 0.7 * t / 3600.0, np.ones_like(t), source="linear")
+    return FitProblem(temi_params, [rec], _LinearSimulator(fail_above), initial_state="params", extend_fraction=0.0)
+
+
+def test_tpe_recovers_known_value_with_startup_trials_20_per_parameter(temi_params):
+    problem = _linear_problem(temi_params)
+    space = fit_space(temi_params, ("Electrode height [m]",))
+    assert STARTUP_TRIALS_PER_PARAMETER == 20
+    result = TPEOptimiser(n_trials=60, seed=0, progress=False).run(problem, space)
+    assert result.best_values["Electrode height [m]"] == pytest.approx(0.7, rel=0.02)
+    assert result.trials == 60 and result.failed_trials == 0
+
+
+def test_failing_simulations_are_failed_trials_and_do_not_stop_the_fit(temi_params):
+    problem = _linear_problem(temi_params, fail_above=1.0)
+    space = fit_space(temi_params, ("Electrode height [m]",))  # bounds 0.449..1.346: part fails
+    result = TPEOptimiser(n_trials=40, seed=0, progress=False).run(problem, space)
+    assert result.trials == 40
+    assert result.failed_trials > 0
+    assert result.best_values["Electrode height [m]"] <= 1.0
+
+
+def test_every_trial_failing_gives_a_clear_error(temi_params):
+    problem = _linear_problem(temi_params, fail_above=0.0)
+    space = fit_space(temi_params, ("Electrode height [m]",))
+    with pytest.raises(SimulationError, match="every trial failed"):
+        TPEOptimiser(n_trials=5, seed=0, progress=False).run(problem, space)
+
+
+def test_stopped_fit_resumes_from_sqlite_storage(temi_params, tmp_path):
+    import optuna
+
+    storage = f"sqlite:///{tmp_path / 'fit.db'}"
+    problem = _linear_problem(temi_params)
+    space = fit_space(temi_params, ("Electrode height [m]",))
+    first = TPEOptimiser(n_trials=8, seed=0, storage=storage, progress=False).run(problem, space)
+    second = TPEOptimiser(n_trials=12, seed=0, storage=storage, progress=False).run(problem, space)
+    assert first.trials == 8 and second.trials == 12
+    study = optuna.load_study(study_name=second.study_name, storage=storage)
+    assert len(study.trials) == 12
+
+
+def test_same_seed_gives_same_fit(temi_params):
+    problem = _linear_problem(temi_params)
+    space = fit_space(temi_params, ("Electrode height [m]",))
+    a = TPEOptimiser(n_trials=25, seed=7, progress=False).run(problem, space)
+    b = TPEOptimiser(n_trials=25, seed=7, progress=False).run(problem, space)
+    assert a.best_values == b.best_values
+
+
+def test_default_bounds_follow_the_paper(temi_params):
+    space = {p.name: p for p in fit_space(temi_params)}
+    h = space["Electrode height [m]"]
+    assert (h.low, h.high) == pytest.approx((0.5 * h.initial, 1.5 * h.initial))
+    eps = space["Positive electrode active material volume fraction"]
+    assert (eps.low, eps.high) == (0.3, 0.75)
+    rc = space["r_c_ohm"]
+    assert (rc.low, rc.high, rc.log) == (pytest.approx(0.1 * rc.initial), pytest.approx(10 * rc.initial), True)

@@ -1,0 +1,112 @@
+"""Pack simulators: the fast path agrees with liionpack on the robots' dynamic profiles."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from battery_predictor.errors import SimulationError
+from battery_predictor.params import load_params
+from battery_predictor.profiles.ranger import longest_route, route_profile
+from battery_predictor.profiles.temi import generate_usage_profile
+from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
+from battery_predictor.simulation.fast import FastPackSimulator
+from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+PARAMS = Path(__file__).resolve().parents[2] / "params"
+
+
+def _compare(params, load, **req_kwargs):
+    """Both simulators on the same 10 s-resampled load (liionpack steps at 10 s)."""
+    stepped = load.resample(10.0)
+    req = SimulationRequest(load=stepped, **req_kwargs)
+    fast = get_simulator("fast").simulate(params, req)
+    ref = get_simulator("liionpack").simulate(params, req)
+    n = min(len(fast.time_s), len(ref.time_s))
+    # the final sample sits on the cut-off knee, where one step of timing dominates the difference
+    diff = fast.pack_voltage_v[: n - 1] - ref.pack_voltage_v[: n - 1]
+    return fast, ref, float(np.sqrt(np.mean(diff**2)))
+
+
+@pytest.mark.slow
+def test_fast_path_matches_liionpack_on_temi_usage_profile_to_cutoff():
+    params = load_params(PARAMS / "temi.yaml")
+    profile = generate_usage_profile(seed=3, max_duration_s=4 * 3600)
+    fast, ref, rms_v = _compare(params, StepLoad.from_profile(profile), initial_soc=0.12)
+    assert ref.termination == "cell_cutoff" and fast.termination == "cell_cutoff"
+    assert rms_v <= 0.005
+    assert abs(fast.end_time_s - ref.end_time_s) / ref.end_time_s <= 0.005
+
+
+@pytest.mark.slow
+def test_fast_path_matches_liionpack_on_ranger_longest_route():
+    params = load_params(PARAMS / "ranger_mini.yaml")
+    profile = route_profile(longest_route(60.0), seed=4)
+    load = StepLoad.from_profile(profile.concatenate(profile))
+    fast, ref, rms_v = _compare(params, load, initial_soc=0.5)
+    assert rms_v <= 0.005
+    assert fast.termination == ref.termination == "end_of_load"
+
+
+def test_equivalent_resistance_of_uniform_strings_is_series_over_parallel():
+    # with negligible busbars the interconnect adds series * R_c / parallel (+ terminal)
+    r = equivalent_network_resistance_ohm(4, 6, 1e-9, 0.09, 1e-9)
+    assert r == pytest.approx(4 * 0.09 / 6, rel=1e-4)
+    # busbar resistance only adds
+    assert equivalent_network_resistance_ohm(4, 6, 1e-3, 0.09, 1e-9) > r
+
+
+def test_fast_simulator_reuses_built_model_when_only_input_parameters_change():
+    params = load_params(PARAMS / "temi.yaml")
+    sim = FastPackSimulator()
+    req = SimulationRequest(load=StepLoad.constant(7.0, 3600.0))
+    a = sim.simulate(params, req)
+    b = sim.simulate(params.with_values({"Electrode height [m]": 0.8}), req)
+    assert sim.builds == 1
+    assert b.pack_voltage_v[-1] < a.pack_voltage_v[-1]  # less electrode area -> deeper discharge
+    sim.simulate(params.with_values({"Negative electrode thickness [m]": 1.0e-4}), req)
+    assert sim.builds == 2  # thickness shapes the mesh: rebuilt
+
+
+def test_initial_soc_and_initial_voltage_set_the_start():
+    params = load_params(PARAMS / "temi.yaml")
+    sim = get_simulator("fast")
+    load = StepLoad.constant(0.01, 60.0)
+    full = sim.simulate(params, SimulationRequest(load=load, initial_soc=1.0))
+    empty = sim.simulate(params, SimulationRequest(load=load, initial_soc=0.05))
+    assert full.pack_voltage_v[0] > empty.pack_voltage_v[0] + 1.0
+    by_v = sim.simulate(params, SimulationRequest(load=load, initial_pack_ocv_v=15.2))
+    assert by_v.pack_voltage_v[0] == pytest.approx(15.2, abs=0.02)
+
+
+def test_cutoff_terminates_and_reports_runtime():
+    params = load_params(PARAMS / "temi.yaml")
+    res = get_simulator("fast").simulate(params, SimulationRequest(load=StepLoad.constant(14.7, 4 * 3600.0)))
+    assert res.termination == "cell_cutoff"
+    assert 0.5 * 3600 < res.end_time_s < 1.5 * 3600  # ~1C on a 14.7 Ah pack
+    assert res.time_to_pack_voltage_s(13.3) < res.end_time_s
+
+
+def test_infeasible_parameters_raise_simulation_error():
+    params = load_params(PARAMS / "temi.yaml")
+    bad = params.with_values({"Initial concentration in negative electrode [mol.m-3]": 1e6})
+    with pytest.raises(SimulationError):
+        get_simulator("fast").simulate(bad, SimulationRequest(load=StepLoad.constant(3.0, 600.0)))
+    with pytest.raises(SimulationError, match="initial SOC"):
+        get_simulator("fast").simulate(params, SimulationRequest(load=StepLoad.constant(3.0, 60.0), initial_soc=1.5))
+
+
+def test_fast_simulator_refuses_per_cell_values():
+    params = load_params(PARAMS / "temi.yaml")
+    req = SimulationRequest(load=StepLoad.constant(3.0, 60.0),
+                            cell_inputs={"Electrode height [m]": np.full(24, 0.9)})
+    with pytest.raises(SimulationError, match="liionpack"):
+        get_simulator("fast").simulate(params, req)
+
+
+def test_step_load_resample_conserves_charge():
+    load = StepLoad.from_durations([3.0, 7.5, 19.0, 1.0], [1.0, 4.0, 2.0, 0.5])
+    for period in (1.0, 2.5, 10.0, 60.0):
+        assert load.resample(period).charge_ah() == pytest.approx(load.charge_ah())
