@@ -1,0 +1,111 @@
+"""The fit / simulate / screen commands as a user runs them: JSON output and one-line errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from battery_predictor.io.csv_io import save_csv
+from battery_predictor.params import load_params
+
+REPO = Path(__file__).resolve().parents[2]
+CLI = str(Path(sys.executable).parent / "battery-predictor")
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([CLI, *args], capture_output=True, text=True, timeout=600, cwd=REPO)
+
+
+@pytest.fixture(scope="module")
+def train_csv(tmp_path_factory, synthetic_temi):
+    path = tmp_path_factory.mktemp("data") / "train.csv"
+    save_csv(synthetic_temi[2], path)
+    return path
+
+
+@pytest.mark.slow
+def test_fit_json_and_fitted_params_file_loadable(train_csv, tmp_path):
+    out = tmp_path / "fit.yaml"
+    proc = _run("fit", "--params", "params/temi.yaml", "--data", str(train_csv), "--trials", "12", "--seed", "3",
+                "--parameters", "Electrode height [m]", "r_c_ohm", "--out", str(out), "--json", "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    obj = json.loads(proc.stdout)
+    assert set(obj) >= {"r2_mod", "trials", "failed_trials", "seconds", "params"}
+    assert obj["trials"] == 12
+    assert set(obj["params"]) == {"Electrode height [m]", "r_c_ohm"}
+    fitted = load_params(out)
+    assert fitted.value("r_c_ohm") == pytest.approx(obj["params"]["r_c_ohm"])
+    assert fitted.provenance["r2_mod"] == pytest.approx(obj["r2_mod"])
+    assert out.with_suffix(".png").stat().st_size > 10_000
+    assert out.with_suffix(".optuna.db").exists()
+    # resume: asking for 15 trials runs only 3 more on the same study
+    proc2 = _run("fit", "--params", "params/temi.yaml", "--data", str(train_csv), "--trials", "15", "--seed", "3",
+                 "--parameters", "Electrode height [m]", "r_c_ohm", "--out", str(out), "--json", "--no-progress")
+    assert json.loads(proc2.stdout)["trials"] == 15
+
+
+def test_simulate_json_reports_score_and_runtimes(train_csv):
+    proc = _run("simulate", "--params", "params/temi.yaml", "--data", str(train_csv), "--json")
+    assert proc.returncode == 0, proc.stderr
+    obj = json.loads(proc.stdout)
+    assert set(obj) >= {"r2_mod", "rmse_mV", "runtime_s_measured", "runtime_s_simulated", "seconds"}
+    assert obj["runtime_s_measured"] > 3600
+    assert -5 < obj["r2_mod"] <= 1
+
+
+def test_screen_json_lists_relevant_parameters():
+    proc = _run("screen", "--params", "params/temi.yaml", "--json")
+    assert proc.returncode == 0, proc.stderr
+    obj = json.loads(proc.stdout)
+    assert "Electrode height [m]" in obj["relevant"]
+
+
+def _assert_one_line_error(proc, *fragments):
+    assert proc.returncode == 2, (proc.stdout, proc.stderr)
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    for frag in fragments:
+        assert frag in lines[0]
+
+
+def test_bad_params_file_is_one_line_error_exit_2(tmp_path, train_csv):
+    data = yaml.safe_load((REPO / "params" / "temi.yaml").read_text())
+    data["cell"]["manual"]["Electrode width"] = 0.058
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(data))
+    proc = _run("simulate", "--params", str(bad), "--data", str(train_csv))
+    _assert_one_line_error(proc, "bad.yaml", "Electrode width", "missing unit")
+
+
+@pytest.mark.parametrize(
+    ("content", "fragment"),
+    [
+        ("", "empty"),
+        ("time_s,voltage_V\n0,16.0\n1,15.9\n", "current_A"),
+        ("time_s,voltage_V,current_A\n0,16.0,2.0\n1,nan,2.0\n2,15.9,2.0\n", "line 3"),
+        ("time_s,voltage_V,current_A\n0,16.0,2.0\n10,15.9,2.0\n5,15.8,2.0\n", "line 4"),
+        ("time_s,voltage_V,current_A\n" + "".join(f"{i},{16000 - i},2.0\n" for i in range(20)), "millivolts"),
+    ],
+)
+def test_bad_data_file_is_one_line_error_exit_2(tmp_path, content, fragment):
+    path = tmp_path / "data.csv"
+    path.write_text(content)
+    proc = _run("fit", "--params", "params/temi.yaml", "--data", str(path), "--trials", "2", "--out",
+                str(tmp_path / "o.yaml"))
+    _assert_one_line_error(proc, "data.csv", fragment)
+
+
+def test_wrong_sign_convention_is_rejected(tmp_path):
+    t = np.arange(0.0, 3600.0, 10.0)
+    rows = "".join(f"{ti},{16.0 - ti / 3600},-3.0\n" for ti in t)
+    path = tmp_path / "neg.csv"
+    path.write_text("time_s,voltage_V,current_A\n" + rows)
+    proc = _run("simulate", "--params", "params/temi.yaml", "--data", str(path))
+    _assert_one_line_error(proc, "neg.csv")
