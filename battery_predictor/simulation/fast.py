@@ -35,6 +35,13 @@ from battery_predictor.simulation.network import equivalent_network_resistance_o
 
 #: Width (s) of the ramp that stands for each current step in the interpolant.
 _EDGE_S = 1e-3
+#: In the isothermal SPM an electrode's thickness L and active material volume fraction eps enter
+#: only as their product (capacity eps*L*A*c_max, reaction current I/(3 eps L A / R)), so a thickness
+#: change is re-solved as the equivalent fraction eps * L / L_built without rebuilding the mesh.
+THICKNESS_TO_FRACTION = {
+    "Negative electrode thickness [m]": "Negative electrode active material volume fraction",
+    "Positive electrode thickness [m]": "Positive electrode active material volume fraction",
+}
 
 
 class FastPackSimulator:
@@ -50,12 +57,18 @@ class FastPackSimulator:
 
     name = "fast"
 
-    def __init__(self, cache_size: int = 8, rtol: float = 1e-6, atol: float = 1e-8) -> None:
-        self._cache: OrderedDict[tuple, object] = OrderedDict()
+    def __init__(self, cache_size: int = 8, rtol: float = 1e-6, atol: float = 1e-8,
+                 map_thickness: bool = True) -> None:
+        self._cache: OrderedDict[tuple, tuple[object, dict[str, float]]] = OrderedDict()
         self._cache_size = cache_size
         self.rtol = rtol
         self.atol = atol
+        self.map_thickness = map_thickness
         self.builds = 0
+
+    def _thickness_mappable(self, params) -> bool:
+        """True when thickness can be folded into the volume fraction (isothermal SPM, no extra options)."""
+        return self.map_thickness and params.model == "SPM" and not params.options and not params.extensions
 
     # ----------------------------------------------------------------- public
     def simulate(self, params, request: SimulationRequest) -> PackSimResult:
@@ -71,7 +84,11 @@ class FastPackSimulator:
         cell_ocv = None if request.initial_pack_ocv_v is None else request.initial_pack_ocv_v / params.series
         c_n0, c_p0 = initial_concentrations(params, pv, initial_soc=request.initial_soc,
                                             initial_cell_ocv_v=cell_ocv)
-        input_keys = sorted(set(ALWAYS_INPUT_KEYS) | (INPUT_SAFE_KEYS & set(params.cell_values)))
+        mapped = self._thickness_mappable(params)
+        input_keys = set(ALWAYS_INPUT_KEYS) | (INPUT_SAFE_KEYS & set(params.cell_values))
+        if mapped:
+            input_keys |= set(THICKNESS_TO_FRACTION.values())
+        input_keys = sorted(input_keys)
         inputs = {}
         for key in input_keys:
             if key in ("Ambient temperature [K]", "Initial temperature [K]"):
@@ -85,7 +102,10 @@ class FastPackSimulator:
                 if not isinstance(val, (int, float)):
                     continue
                 inputs[key] = float(val)
-        sim, t_end = self._simulation(params, pv, request, tuple(sorted(inputs)))
+        sim, t_end, built_thickness = self._simulation(params, pv, request, tuple(sorted(inputs)), mapped)
+        for thick_key, frac_key in THICKNESS_TO_FRACTION.items():
+            if thick_key in built_thickness:
+                inputs[frac_key] *= float(pv[thick_key]) / built_thickness[thick_key]
         try:
             with quiet_pybamm():
                 sol = sim.solve(t_eval=[0.0, t_end], inputs=inputs)
@@ -94,17 +114,20 @@ class FastPackSimulator:
         return self._result(params, request, sol, tic)
 
     # ---------------------------------------------------------------- helpers
-    def _simulation(self, params, pv, request: SimulationRequest, input_keys: tuple[str, ...]):
+    def _simulation(self, params, pv, request: SimulationRequest, input_keys: tuple[str, ...], mapped: bool):
         import pybamm
 
         load = request.load
-        fixed = tuple(sorted((k, repr(v)) for k, v in params.cell_values.items() if k not in input_keys))
+        skip = set(input_keys) | (set(THICKNESS_TO_FRACTION) if mapped else set())
+        fixed = tuple(sorted((k, repr(v)) for k, v in params.cell_values.items() if k not in skip))
         key = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions,
-               fixed, input_keys, load.digest(), params.parallel)
+               fixed, input_keys, load.digest(), params.parallel, mapped)
         t_end = float(load.end_s) - _EDGE_S
         if key in self._cache:
             self._cache.move_to_end(key)
-            return self._cache[key], t_end
+            sim, built_thickness = self._cache[key]
+            return sim, t_end, built_thickness
+        built_thickness = {k: float(pv[k]) for k in THICKNESS_TO_FRACTION} if mapped else {}
         edges = load.edges_s()
         knots_t = np.column_stack([edges[:-1], edges[1:] - _EDGE_S]).ravel()
         knots_i = np.repeat(load.current_a / params.parallel, 2)
@@ -120,10 +143,10 @@ class FastPackSimulator:
         except (pybamm.ModelError, pybamm.DiscretisationError, KeyError, ValueError) as exc:
             raise SimulationError(f"cannot build the cell model: {str(exc).splitlines()[0]}") from None
         self.builds += 1
-        self._cache[key] = sim
+        self._cache[key] = (sim, built_thickness)
         if len(self._cache) > self._cache_size:
             self._cache.popitem(last=False)
-        return sim, t_end
+        return sim, t_end, built_thickness
 
     def _result(self, params, request: SimulationRequest, sol, tic: float) -> PackSimResult:
         load = request.load

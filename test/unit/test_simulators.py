@@ -66,8 +66,21 @@ def test_fast_simulator_reuses_built_model_when_only_input_parameters_change():
     b = sim.simulate(params.with_values({"Electrode height [m]": 0.8}), req)
     assert sim.builds == 1
     assert b.pack_voltage_v[-1] < a.pack_voltage_v[-1]  # less electrode area -> deeper discharge
-    sim.simulate(params.with_values({"Negative electrode thickness [m]": 1.0e-4}), req)
-    assert sim.builds == 2  # thickness shapes the mesh: rebuilt
+    sim.simulate(params.with_values({"Negative particle radius [m]": 6.0e-6}), req)
+    assert sim.builds == 2  # particle radius shapes the mesh: rebuilt
+
+
+def test_thickness_folded_into_volume_fraction_equals_a_rebuilt_model():
+    params = load_params(PARAMS / "temi.yaml")
+    req = SimulationRequest(load=StepLoad.from_durations([600.0, 300.0, 900.0] * 4, [3.0, 9.0, 1.5] * 4))
+    mapped, rebuilt = FastPackSimulator(), FastPackSimulator(map_thickness=False)
+    mapped.simulate(params, req)
+    for change in ({"Negative electrode thickness [m]": 1.0e-4},
+                   {"Positive electrode thickness [m]": 1.3e-4, "Negative electrode thickness [m]": 1.4e-4}):
+        p = params.with_values(change)
+        a, b = mapped.simulate(p, req), rebuilt.simulate(p, req)
+        np.testing.assert_allclose(a.pack_voltage_v, b.pack_voltage_v, atol=2e-4)
+    assert mapped.builds == 1 and rebuilt.builds == 2
 
 
 def test_initial_soc_and_initial_voltage_set_the_start():
