@@ -59,7 +59,8 @@ class Recording:
         """Charge drawn over the recording in Ah (trapezoidal, discharge positive)."""
         if len(self.time_s) < 2:
             return 0.0
-        return float(np.trapezoid(self.current_a, self.time_s) / 3600.0) if hasattr(np, "trapezoid") else float(np.trapz(self.current_a, self.time_s) / 3600.0)
+        dt = np.diff(self.time_s)
+        return float(np.sum(0.5 * (self.current_a[1:] + self.current_a[:-1]) * dt) / 3600.0)
 
     def mean_temperature_k(self, default_k: float = 298.15) -> float:
         """Mean temperature in K, or ``default_k`` when not measured."""
@@ -67,7 +68,7 @@ class Recording:
             return float(default_k)
         return float(np.nanmean(self.temperature_k))
 
-    def slice_time(self, start_s: float, end_s: float) -> "Recording":
+    def slice_time(self, start_s: float, end_s: float) -> Recording:
         """Samples with ``start_s <= time_s <= end_s`` (absolute times)."""
         mask = (self.time_s >= start_s) & (self.time_s <= end_s)
         return Recording(

@@ -53,9 +53,9 @@ def main() -> int:
     profile = generate_usage_profile(seed=args.seed, max_duration_s=5 * 3600)
     load = StepLoad.from_profile(profile).resample(10.0)
     # start so that the pack reaches its cut-off within the 5 h profile
-    req = SimulationRequest(load=load, initial_soc=0.55)
+    req = SimulationRequest(load=load, initial_soc=0.42)
     print(f"profile: Temi usage seed {args.seed}, {load.duration_s / 3600:.2f} h, {len(load.start_s)} steps of 10 s, "
-          f"mean {load.mean_current_a():.2f} A; pack {params.name} {params.series}S{params.parallel}P, SOC0 0.55")
+          f"mean {load.mean_current_a():.2f} A; pack {params.name} {params.series}S{params.parallel}P, SOC0 0.42")
 
     lp_times = []
     for _ in range(args.liionpack_runs):

@@ -51,7 +51,7 @@ def run(args) -> int:
     best = problem.evaluate(result.best_values)
     fitted = params.with_values(result.best_values, provenance={
         "fitted_by": "battery-predictor fit (Optuna TPE, R2_mod of the seed paper Eq. 1-3)",
-        "fitted_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "fitted_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "data": [str(r.source) for r in recs],
         "r2_mod": best.r2_mod,
         "r2_mod_per_file": best.per_recording,

@@ -1,0 +1,1 @@
+"""Predictions the robots use (ROS-free): SOC calibration, remaining runtime, route acceptance."""

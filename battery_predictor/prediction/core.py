@@ -1,0 +1,243 @@
+"""The predictor's logic without ROS: pack state, discharge-cycle average, runtime and routes.
+
+The predictor node is a thin adapter around :class:`PredictorCore`: it feeds
+clean pack states (from the battery monitor) with :meth:`PredictorCore.update_state`,
+asks :meth:`PredictorCore.remaining_runtime` on a timer and
+:meth:`PredictorCore.can_accept_route` from the service. Nothing here raises for
+bad input or a failing model: every answer carries a status and a reason.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.params import PackParams, load_params
+from battery_predictor.prediction.calibration import calibrate_soc
+from battery_predictor.prediction.cell_runner import PackRunner
+from battery_predictor.prediction.route import RouteDecision, evaluate_route, rejected
+from battery_predictor.prediction.runtime import predict_remaining_runtime
+
+# Status codes, identical to battery_predictor_msgs/RemainingRuntime constants.
+STATUS_OK = 0
+STATUS_STALE_INPUT = 1
+STATUS_NO_INPUT = 2
+STATUS_MODEL_NOT_FITTED = 3
+STATUS_MODEL_FAILED = 4
+STATUS_BELOW_CUTOFF = 5
+
+
+@dataclass(frozen=True)
+class PredictorConfig:
+    """Settings of the predictor (copied from ROS parameters by the node).
+
+    Attributes
+    ----------
+    params_file : str
+        Fitted pack params YAML.
+    cutoff_voltage_v : float
+        Pack voltage at which the robot stops (runtime); NaN = from params thresholds.
+    route_min_voltage_v : float
+        Route acceptance threshold; NaN = from params thresholds.
+    standstill_current_a : float
+        Current the threshold applies at; NaN = from params thresholds.
+    stale_after_s : float
+        A pack state older than this is stale.
+    charge_current_a : float
+        A current below ``-charge_current_a`` (charging) ends the present discharge cycle.
+    default_temperature_k : float
+        Temperature used when none is measured; NaN = params ambient.
+    route_currents_file : str
+        Ranger per-(payload, slope) current samples (empty = shipped default).
+    """
+
+    params_file: str
+    cutoff_voltage_v: float = math.nan
+    route_min_voltage_v: float = math.nan
+    standstill_current_a: float = math.nan
+    stale_after_s: float = 30.0
+    charge_current_a: float = 0.2
+    default_temperature_k: float = math.nan
+    route_currents_file: str = ""
+
+
+@dataclass(frozen=True)
+class RuntimeStatus:
+    """What ``/remaining_runtime`` publishes (see RemainingRuntime.msg)."""
+
+    stamp_s: float
+    remaining_s: float
+    assumed_current_a: float
+    assumed_temperature_k: float
+    state_of_charge: float
+    cutoff_voltage_v: float
+    valid: bool
+    status: int
+    reason: str
+
+
+class _CycleAverage:
+    """Time-weighted average current of the present discharge cycle (reset by charging)."""
+
+    def __init__(self, charge_current_a: float) -> None:
+        self.charge_current_a = charge_current_a
+        self.reset()
+
+    def reset(self) -> None:
+        self.charge_as = 0.0
+        self.duration_s = 0.0
+        self.last_stamp_s: float | None = None
+        self.last_current_a = 0.0
+
+    def add(self, stamp_s: float, current_a: float) -> None:
+        if current_a < -self.charge_current_a:
+            self.reset()
+            return
+        if self.last_stamp_s is not None and stamp_s > self.last_stamp_s:
+            dt = min(stamp_s - self.last_stamp_s, 300.0)  # a gap counts at most 5 min
+            self.charge_as += dt * self.last_current_a
+            self.duration_s += dt
+        self.last_stamp_s = stamp_s
+        self.last_current_a = current_a
+
+    def mean_a(self) -> float:
+        if self.duration_s <= 0:
+            return self.last_current_a
+        return self.charge_as / self.duration_s
+
+
+class PredictorCore:
+    """State and answers of the predictor (thread-safe).
+
+    Parameters
+    ----------
+    config : PredictorConfig
+        Settings.
+    params : PackParams, optional
+        Already loaded params (otherwise read from ``config.params_file``).
+    """
+
+    def __init__(self, config: PredictorConfig, params: PackParams | None = None) -> None:
+        self.config = config
+        self._lock = threading.Lock()
+        self._state: tuple[float, float, float, float] | None = None
+        self._cycle = _CycleAverage(config.charge_current_a)
+        self.model_error = ""
+        self.params: PackParams | None = None
+        self.runner: PackRunner | None = None
+        try:
+            self.params = params or load_params(Path(config.params_file))
+            self.runner = PackRunner(self.params)
+        except BatteryPredictorError as exc:
+            self.model_error = str(exc)
+        th = self.params.thresholds if self.params else {}
+        self.cutoff_voltage_v = _pick(config.cutoff_voltage_v, th.get("runtime_cutoff_voltage_v"),
+                                      self.params.pack_info.get("min_voltage_v") if self.params else None)
+        self.route_min_voltage_v = _pick(config.route_min_voltage_v, th.get("route_min_voltage_v"))
+        self.standstill_current_a = _pick(config.standstill_current_a, th.get("standstill_current_a"), 1.70)
+        self.default_temperature_k = _pick(config.default_temperature_k,
+                                           self.params.ambient_temperature_k if self.params else None, 298.15)
+        self._currents = None
+        if config.route_currents_file:
+            from battery_predictor.profiles.ranger import load_ranger_currents
+
+            try:
+                self._currents = load_ranger_currents(config.route_currents_file)
+            except BatteryPredictorError as exc:
+                self.model_error = self.model_error or str(exc)
+
+    # ----------------------------------------------------------------- input
+    def update_state(self, stamp_s: float, voltage_v: float, current_a: float, temperature_k: float) -> None:
+        """Take a clean pack state (V, A positive = discharge, K or NaN) stamped ``stamp_s``."""
+        if not (math.isfinite(stamp_s) and math.isfinite(voltage_v) and math.isfinite(current_a)):
+            return
+        with self._lock:
+            if self._state is not None and stamp_s <= self._state[0]:
+                return
+            self._state = (stamp_s, voltage_v, current_a, temperature_k)
+            self._cycle.add(stamp_s, current_a)
+
+    def latest_state(self) -> tuple[float, float, float, float] | None:
+        """(stamp_s, voltage_v, current_a, temperature_k) of the latest state, or None."""
+        with self._lock:
+            return self._state
+
+    def _usable_state(self, now_s: float) -> tuple[int, str, tuple | None]:
+        if self.runner is None:
+            return STATUS_MODEL_NOT_FITTED, f"no usable pack model: {self.model_error}", None
+        state = self.latest_state()
+        if state is None:
+            return STATUS_NO_INPUT, "no pack state received yet", None
+        age = now_s - state[0]
+        if age > self.config.stale_after_s:
+            return STATUS_STALE_INPUT, f"pack state is stale ({age:.1f} s old, limit {self.config.stale_after_s:.0f} s)", state
+        return STATUS_OK, "", state
+
+    def _temperature(self, temperature_k: float) -> float:
+        return temperature_k if math.isfinite(temperature_k) and 200 < temperature_k < 400 else \
+            self.default_temperature_k
+
+    # --------------------------------------------------------------- answers
+    def remaining_runtime(self, now_s: float) -> RuntimeStatus:
+        """Remaining runtime until the cut-off under the present cycle's average load."""
+        status, reason, state = self._usable_state(now_s)
+        cutoff = self.cutoff_voltage_v
+        if status != STATUS_OK:
+            return RuntimeStatus(now_s, math.nan, math.nan, math.nan, math.nan, cutoff, False, status, reason)
+        stamp, v, i, t_k = state
+        temp = self._temperature(t_k)
+        with self._lock:
+            avg = self._cycle.mean_a()
+        avg = avg if avg > 0.05 else max(i, 0.05)
+        if v <= cutoff:
+            return RuntimeStatus(stamp, 0.0, avg, temp, math.nan, cutoff, True, STATUS_BELOW_CUTOFF,
+                                 f"pack voltage {v:.2f} V is at or below the cut-off {cutoff:.2f} V")
+        try:
+            pred = predict_remaining_runtime(self.runner, v, i, temp, avg, cutoff)
+        except BatteryPredictorError as exc:
+            return RuntimeStatus(stamp, math.nan, avg, temp, math.nan, cutoff, False, STATUS_MODEL_FAILED,
+                                 f"model failed: {exc}")
+        note = f"; calibration {pred.calibration.clipped}" if pred.calibration.clipped else ""
+        reason = (f"{pred.remaining_s / 60:.1f} min at {avg:.2f} A, {temp - 273.15:.1f} degC until "
+                  f"{cutoff:.2f} V ({pred.limited_by}){note}")
+        return RuntimeStatus(stamp, pred.remaining_s, avg, temp, pred.calibration.soc, cutoff, True, STATUS_OK,
+                             reason)
+
+    def can_accept_route(self, sections, now_s: float, *, starts_away_from_charger: bool = False,
+                         ends_away_from_charger: bool = False) -> RouteDecision:
+        """Decide a route (sections: :class:`~battery_predictor.profiles.ranger.RouteSection`)."""
+        threshold = self.route_min_voltage_v
+        if not math.isfinite(threshold):
+            return rejected("params define no route threshold (thresholds.route_min_voltage_v)", threshold)
+        status, reason, state = self._usable_state(now_s)
+        if status != STATUS_OK:
+            return rejected(f"state unknown: {reason}", threshold)
+        _, v, i, t_k = state
+        temp = self._temperature(t_k)
+        try:
+            cal = calibrate_soc(self.runner, v, i, temp)
+        except BatteryPredictorError as exc:
+            return rejected(f"model failed while calibrating: {exc}", threshold)
+        if cal.clipped == "below_empty":
+            return rejected(f"pack voltage {v:.2f} V at {i:.2f} A is below the model's empty state", threshold,
+                            soc=0.0)
+        decision = evaluate_route(self.runner, cal.soc, sections, temp, threshold_v=threshold,
+                                  standstill_current_a=self.standstill_current_a, currents=self._currents)
+        notes = []
+        if starts_away_from_charger:
+            notes.append("starts away from the charger (state as measured now)")
+        if ends_away_from_charger:
+            notes.append("ends away from the charger: no return leg included")
+        if notes:
+            decision = RouteDecision(**{**decision.__dict__, "reason": decision.reason + "; " + "; ".join(notes)})
+        return decision
+
+
+def _pick(*values) -> float:
+    for v in values:
+        if v is not None and isinstance(v, (int, float)) and math.isfinite(v):
+            return float(v)
+    return math.nan

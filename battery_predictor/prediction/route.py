@@ -1,0 +1,127 @@
+"""Route acceptance for the luggage robot (paper 5.2.4).
+
+A route's sections become constant-current segments with the per-(payload,
+slope) average currents; the pack is simulated from the calibrated SOC; the
+route is accepted only when the pack voltage at the standstill current after the
+route stays at or above the threshold (46.31 V at 1.70 A for the Ranger Mini).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from battery_predictor.errors import BatteryPredictorError, RequestError
+from battery_predictor.prediction.cell_runner import PackRunner
+from battery_predictor.profiles.ranger import RangerCurrents, RouteSection, mean_current_a
+
+#: Standstill after the route at which the voltage is read, s (the paper's final curve point).
+SETTLE_S = 60.0
+#: No single request may describe more than this.
+MAX_SECTIONS = 500
+MAX_ROUTE_DURATION_S = 24 * 3600.0
+
+
+@dataclass(frozen=True)
+class RouteDecision:
+    """Answer to "can the robot accept this route?".
+
+    Attributes
+    ----------
+    accepted : bool
+        True when the predicted voltage after the route is at or above the threshold.
+    predicted_voltage_v : float
+        Pack voltage in V at the standstill current after the route (NaN when not reached).
+    threshold_voltage_v : float
+        The acceptance threshold in V.
+    margin_v : float
+        ``predicted - threshold`` in V (NaN when not computed).
+    route_duration_s : float
+        Route duration in s (driving + standstills).
+    route_charge_ah : float
+        Charge the route draws in Ah (average currents).
+    state_of_charge : float
+        SOC the prediction started from (NaN when unknown).
+    reason : str
+        Human-readable reason.
+    """
+
+    accepted: bool
+    predicted_voltage_v: float
+    threshold_voltage_v: float
+    margin_v: float
+    route_duration_s: float
+    route_charge_ah: float
+    state_of_charge: float
+    reason: str
+
+
+def route_segments(sections: Sequence[RouteSection], standstill_current_a: float,
+                   currents: RangerCurrents | None = None) -> list[tuple[float, float]]:
+    """Constant-current segments ``(duration_s, pack_current_a)`` of a route (average currents)."""
+    if not sections:
+        raise RequestError("route has no sections")
+    if len(sections) > MAX_SECTIONS:
+        raise RequestError(f"route has {len(sections)} sections (at most {MAX_SECTIONS})")
+    segments = []
+    for sec in sections:
+        if sec.length_m > 0:
+            segments.append((sec.travel_s, mean_current_a(sec.payload_kg, sec.slope, currents)))
+        if sec.standstill_s > 0:
+            segments.append((sec.standstill_s, standstill_current_a))
+    return segments
+
+
+def rejected(reason: str, threshold_v: float, *, duration_s: float = math.nan, charge_ah: float = math.nan,
+             soc: float = math.nan) -> RouteDecision:
+    """A rejection that carries its reason (used for invalid requests and unknown state too)."""
+    return RouteDecision(False, math.nan, threshold_v, math.nan, duration_s, charge_ah, soc, reason)
+
+
+def evaluate_route(runner: PackRunner, soc: float, sections: Sequence[RouteSection], temperature_k: float, *,
+                   threshold_v: float, standstill_current_a: float, currents: RangerCurrents | None = None,
+                   settle_s: float = SETTLE_S) -> RouteDecision:
+    """Simulate a route from ``soc`` and decide (never raises for a bad route: rejects with a reason).
+
+    Parameters
+    ----------
+    runner : PackRunner
+        The fitted pack model.
+    soc : float
+        Calibrated SOC at the start.
+    sections : sequence of RouteSection
+        The route (validated dataclasses).
+    temperature_k : float
+        Temperature assumed, K.
+    threshold_v, standstill_current_a : float
+        Acceptance threshold (V) and the standstill current (A) it applies at.
+    """
+    try:
+        segments = route_segments(sections, standstill_current_a, currents)
+    except BatteryPredictorError as exc:
+        return rejected(f"invalid route: {exc}", threshold_v, soc=soc)
+    duration_s = sum(d for d, _ in segments)
+    charge_ah = sum(d * i for d, i in segments) / 3600.0
+    if duration_s > MAX_ROUTE_DURATION_S:
+        return rejected(f"route lasts {duration_s / 3600:.1f} h, longer than any battery could run "
+                        f"(limit {MAX_ROUTE_DURATION_S / 3600:.0f} h)", threshold_v, duration_s=duration_s,
+                        charge_ah=charge_ah, soc=soc)
+    if charge_ah > runner.capacity_ah:
+        return rejected(f"route draws {charge_ah:.1f} Ah, more than the full pack holds ({runner.capacity_ah:.1f} Ah)",
+                        threshold_v, duration_s=duration_s, charge_ah=charge_ah, soc=soc)
+    try:
+        run = runner.run(soc, [*segments, (settle_s, standstill_current_a)], temperature_k)
+    except BatteryPredictorError as exc:
+        return rejected(f"model failed: {exc}", threshold_v, duration_s=duration_s, charge_ah=charge_ah, soc=soc)
+    if run.reached_cutoff:
+        return rejected(f"a cell reaches its cut-off {run.end_time_s / 60:.1f} min into the route",
+                        threshold_v, duration_s=duration_s, charge_ah=charge_ah, soc=soc)
+    v_end = float(run.pack_voltage_v[-1])
+    margin = v_end - threshold_v
+    accepted = margin >= 0.0
+    verdict = "accepted" if accepted else "rejected"
+    reason = (f"{verdict}: predicted {v_end:.2f} V at {standstill_current_a:.2f} A after the route "
+              f"({duration_s / 60:.1f} min, {charge_ah:.2f} Ah), threshold {threshold_v:.2f} V, "
+              f"margin {margin:+.2f} V, start SOC {soc:.3f}")
+    return RouteDecision(accepted, v_end, threshold_v, margin, duration_s, charge_ah, soc, reason)

@@ -1,0 +1,91 @@
+"""Remaining runtime (paper 5.1.5, steps 2-3).
+
+From the calibrated SOC, the pack is simulated under the average current of the
+present discharge cycle at the last measured temperature; the remaining runtime
+is the time until the pack voltage reaches the robot's cut-off (13.30 V for the
+information robot) or a cell reaches its lower cut-off, whichever comes first.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from battery_predictor.errors import SimulationError
+from battery_predictor.prediction.calibration import Calibration, calibrate_soc
+from battery_predictor.prediction.cell_runner import PackRunner
+
+#: Longest horizon simulated, s (beyond it the runtime is reported as at least this).
+MAX_HORIZON_S = 72 * 3600.0
+
+
+@dataclass(frozen=True)
+class RuntimePrediction:
+    """A remaining-runtime prediction.
+
+    Attributes
+    ----------
+    remaining_s : float
+        Time in s until the cut-off (``MAX_HORIZON_S`` when not reached within it).
+    calibration : Calibration
+        The calibrated SOC it started from.
+    assumed_current_a, assumed_temperature_k : float
+        The load and temperature it assumed.
+    cutoff_voltage_v : float
+        Pack voltage threshold in V.
+    limited_by : str
+        ``"pack_cutoff"``, ``"cell_cutoff"`` or ``"horizon"``.
+    """
+
+    remaining_s: float
+    calibration: Calibration
+    assumed_current_a: float
+    assumed_temperature_k: float
+    cutoff_voltage_v: float
+    limited_by: str
+
+
+def time_to_voltage_s(time_s: np.ndarray, voltage_v: np.ndarray, threshold_v: float) -> float | None:
+    """First time (s) at which ``voltage_v`` falls to ``threshold_v`` (linear interpolation), or None."""
+    below = np.nonzero(voltage_v <= threshold_v)[0]
+    if below.size == 0:
+        return None
+    i = int(below[0])
+    if i == 0:
+        return float(time_s[0])
+    v0, v1, t0, t1 = voltage_v[i - 1], voltage_v[i], time_s[i - 1], time_s[i]
+    return float(t0 + (v0 - threshold_v) / (v0 - v1) * (t1 - t0)) if v0 != v1 else float(t1)
+
+
+def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: float, temperature_k: float,
+                              average_current_a: float, cutoff_voltage_v: float) -> RuntimePrediction:
+    """Calibrate the SOC on the latest sample, then simulate the average load to the cut-off.
+
+    Parameters
+    ----------
+    runner : PackRunner
+        The fitted pack model.
+    voltage_v, current_a, temperature_k : float
+        Latest measured pack voltage (V), current (A, positive = discharge) and temperature (K).
+    average_current_a : float
+        Average discharge current of the present cycle in A (> 0).
+    cutoff_voltage_v : float
+        Pack voltage at which the robot stops (V).
+    """
+    if not (math.isfinite(average_current_a) and average_current_a > 0):
+        raise SimulationError(f"average discharge current must be > 0 A, got {average_current_a}")
+    cal = calibrate_soc(runner, voltage_v, current_a, temperature_k)
+    if voltage_v <= cutoff_voltage_v:
+        return RuntimePrediction(0.0, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
+    charge_left_ah = max(cal.soc, 0.02) * runner.capacity_ah
+    horizon_s = min(MAX_HORIZON_S, 1.5 * charge_left_ah * 3600.0 / average_current_a + 3600.0)
+    run = runner.run(cal.soc, [(horizon_s, average_current_a)], temperature_k)
+    t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
+    if t_pack is not None:
+        return RuntimePrediction(t_pack, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
+    if run.reached_cutoff:
+        return RuntimePrediction(run.end_time_s, cal, average_current_a, temperature_k, cutoff_voltage_v,
+                                 "cell_cutoff")
+    return RuntimePrediction(horizon_s, cal, average_current_a, temperature_k, cutoff_voltage_v, "horizon")

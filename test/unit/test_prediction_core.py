@@ -1,0 +1,134 @@
+"""Prediction core (no ROS): SOC calibration, remaining runtime, route decisions, bad input."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from battery_predictor.params import load_params
+from battery_predictor.prediction.calibration import calibrate_soc
+from battery_predictor.prediction.cell_runner import PackRunner
+from battery_predictor.prediction.core import (
+    STATUS_MODEL_NOT_FITTED,
+    STATUS_NO_INPUT,
+    STATUS_OK,
+    STATUS_STALE_INPUT,
+    PredictorConfig,
+    PredictorCore,
+)
+from battery_predictor.prediction.route import evaluate_route
+from battery_predictor.prediction.runtime import predict_remaining_runtime
+from battery_predictor.profiles.ranger import RouteSection, longest_route
+from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
+
+PARAMS = Path(__file__).resolve().parents[2] / "params"
+
+
+@pytest.fixture(scope="module")
+def temi_runner():
+    return PackRunner(load_params(PARAMS / "temi.yaml"))
+
+
+@pytest.fixture(scope="module")
+def ranger_core():
+    return PredictorCore(PredictorConfig(params_file=str(PARAMS / "ranger_mini.yaml")))
+
+
+@pytest.mark.parametrize("soc", [0.15, 0.5, 0.9])
+def test_calibration_recovers_the_soc_that_produced_a_voltage(temi_runner, soc):
+    v = temi_runner.settled_voltage_v(soc, 2.0, 298.15)
+    cal = calibrate_soc(temi_runner, v, 2.0, 298.15)
+    assert cal.soc == pytest.approx(soc, abs=2e-3)
+    assert abs(cal.residual_v) < 1e-3 and cal.clipped == ""
+
+
+def test_calibration_clips_outside_the_model_range(temi_runner):
+    assert calibrate_soc(temi_runner, 25.0, 1.0, 298.15).clipped == "above_full"
+    assert calibrate_soc(temi_runner, 9.0, 1.0, 298.15).clipped == "below_empty"
+
+
+def test_runner_agrees_with_fast_simulator(temi_runner):
+    params = temi_runner.params
+    segs = [(600.0, 3.0), (300.0, 6.0), (900.0, 1.5)]
+    run = temi_runner.run(0.7, segs, 298.15)
+    ref = get_simulator("fast").simulate(params, SimulationRequest(
+        load=StepLoad.from_durations([d for d, _ in segs], [i for _, i in segs]), initial_soc=0.7,
+        output_time_s=np.array([599.0, 899.0, 1799.0])))
+    np.testing.assert_allclose(run.pack_voltage_v[run.segment_end_index], ref.pack_voltage_v, atol=0.01)
+
+
+def test_runtime_prediction_matches_a_simulated_discharge(temi_runner):
+    # truth: constant 2.5 A from SOC 0.6 until 13.30 V, simulated by the fast simulator
+    params = temi_runner.params
+    res = get_simulator("fast").simulate(params, SimulationRequest(load=StepLoad.constant(2.5, 10 * 3600.0),
+                                                                   initial_soc=0.6))
+    t_true = res.time_to_pack_voltage_s(13.30)
+    t_now = 3600.0
+    v_now = float(np.interp(t_now + 0.002, res.time_s, res.pack_voltage_v))
+    pred = predict_remaining_runtime(temi_runner, v_now, 2.5, 298.15, 2.5, 13.30)
+    assert pred.remaining_s == pytest.approx(t_true - t_now, rel=0.03)
+    assert pred.limited_by == "pack_cutoff"
+
+
+def test_heavier_payload_lowers_the_predicted_voltage(ranger_core):
+    runner = ranger_core.runner
+    volts = [evaluate_route(runner, 0.4, longest_route(kg).sections, 298.15, threshold_v=46.31,
+                            standstill_current_a=1.7).predicted_voltage_v for kg in (20, 40, 60, 80)]
+    assert all(np.diff(volts) < 0)
+
+
+def test_route_rejected_near_empty_and_accepted_when_full(ranger_core):
+    runner = ranger_core.runner
+    full = evaluate_route(runner, 0.95, longest_route(80).sections, 298.15, threshold_v=46.31,
+                          standstill_current_a=1.7)
+    four_times = longest_route(80).sections * 4
+    empty = evaluate_route(runner, 0.01, four_times, 298.15, threshold_v=46.31, standstill_current_a=1.7)
+    assert full.accepted and full.margin_v > 0 and "accepted" in full.reason
+    assert not empty.accepted and empty.reason
+    assert full.route_duration_s == pytest.approx(1900.0)
+
+
+def test_route_longer_than_any_battery_is_rejected_with_reason(ranger_core):
+    huge = [RouteSection("far", 1.0e5, "uphill", 80.0)]
+    d = evaluate_route(ranger_core.runner, 1.0, huge, 298.15, threshold_v=46.31, standstill_current_a=1.7)
+    assert not d.accepted and "longer than any battery" in d.reason
+
+
+def test_core_without_state_or_with_stale_state_rejects_and_invalidates(ranger_core):
+    fresh = PredictorCore(PredictorConfig(params_file=str(PARAMS / "ranger_mini.yaml")))
+    rt = fresh.remaining_runtime(100.0)
+    assert not rt.valid and rt.status == STATUS_NO_INPUT
+    d = fresh.can_accept_route(longest_route(20).sections, 100.0)
+    assert not d.accepted and "no pack state" in d.reason
+    fresh.update_state(100.0, 50.0, 1.7, 298.15)
+    assert fresh.can_accept_route(longest_route(20).sections, 101.0).accepted
+    stale = fresh.can_accept_route(longest_route(20).sections, 100.0 + 31.0)
+    assert not stale.accepted and "stale" in stale.reason
+    assert fresh.remaining_runtime(131.0).status == STATUS_STALE_INPUT
+
+
+def test_core_with_broken_params_reports_model_not_fitted(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\n")
+    core = PredictorCore(PredictorConfig(params_file=str(bad)))
+    core.update_state(1.0, 15.0, 2.0, 298.15)
+    rt = core.remaining_runtime(1.0)
+    assert rt.status == STATUS_MODEL_NOT_FITTED and not rt.valid and "bad.yaml" in rt.reason
+    assert not core.can_accept_route(longest_route(20).sections, 1.0).accepted
+
+
+def test_core_runtime_uses_the_discharge_cycle_average_and_resets_on_charge():
+    core = PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml")))
+    for k in range(10):
+        core.update_state(10.0 * k, 15.5, 2.0 if k % 2 else 4.0, 298.15)
+    rt = core.remaining_runtime(95.0)
+    assert rt.status == STATUS_OK and rt.valid
+    assert rt.assumed_current_a == pytest.approx(3.0, abs=0.25)
+    core.update_state(100.0, 16.0, -5.0, 298.15)  # charging ends the cycle
+    core.update_state(110.0, 15.9, 1.0, 298.15)
+    core.update_state(120.0, 15.9, 1.0, 298.15)
+    assert core.remaining_runtime(121.0).assumed_current_a == pytest.approx(1.0)
+    assert math.isfinite(core.remaining_runtime(121.0).remaining_s)
