@@ -13,7 +13,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 BAGS = REPO / "bags"
 DEMO_FIT_BAG = "temi_dynamic_pack1"
-DEMO_VALIDATION_BAG = "temi_static_0p5C"
+DEMO_VALIDATION_BAG = "temi_static_0p5c_pack1"
 
 
 def register(sub) -> None:

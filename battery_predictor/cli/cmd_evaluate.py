@@ -1,0 +1,127 @@
+"""``battery-predictor evaluate``: the seed paper's experiments with its figures side by side."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+from battery_predictor.cli.common import print_json
+
+REPO = Path(__file__).resolve().parents[2]
+BASE_SETS = ("Chen2020", "NCA_Kim2011", "OKane2022")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("evaluate", help="reproduce the paper's evaluation (Table 2, Fig. 4/5/7/8) on recordings")
+    p.add_argument("--bags", default=str(REPO / "bags"), help="directory of the bundled bags")
+    p.add_argument("--temi-params", default=str(REPO / "params" / "temi.yaml"))
+    p.add_argument("--ranger-params", default=str(REPO / "params" / "ranger_mini.yaml"))
+    p.add_argument("--temi-dynamic", nargs="+", default=None,
+                   help="information robot dynamic discharges (first = fit data); default: bundled temi_dynamic_*")
+    p.add_argument("--temi-static", default=None, help="information robot static discharge")
+    p.add_argument("--ranger-stepwise", default=None, help="luggage robot stepwise experiment")
+    p.add_argument("--ranger-routes", nargs="+", default=None, help="luggage robot route bags (with truth metadata)")
+    p.add_argument("--base-sets", nargs="+", default=list(BASE_SETS), help="PyBaMM sets compared in Table 2")
+    p.add_argument("--trials", type=int, default=300, help="TPE trials per fit (paper: 1000)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--skip", nargs="*", default=[], choices=("table2", "runtime", "routes"),
+                   help="parts to skip")
+    p.add_argument("--out", default="evaluation", help="report directory")
+    p.add_argument("--json", action="store_true", help="print one JSON object with the figures")
+    p.set_defaults(func=run)
+
+
+def _bundled(bags: Path, pattern: str) -> list[str]:
+    return sorted(str(p) for p in bags.glob(pattern) if p.is_dir() or p.suffix == ".mcap")
+
+
+def run(args) -> int:
+    from battery_predictor.errors import InputDataError
+    from battery_predictor.evaluation import report
+    from battery_predictor.evaluation.paper_eval import (
+        PAPER,
+        _score,
+        fit_pack,
+        route_evaluation,
+        route_summary,
+        runtime_evaluation,
+        runtime_summary,
+        table2,
+    )
+    from battery_predictor.fitting.problem import trim_to_discharge
+    from battery_predictor.io.loader import load_recording
+    from battery_predictor.params import load_params
+
+    tic = time.perf_counter()
+    bags = Path(args.bags)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    dyn_files = args.temi_dynamic or _bundled(bags, "temi_dynamic_*")
+    static_file = args.temi_static or next(iter(_bundled(bags, "temi_static_*")), None)
+    step_file = args.ranger_stepwise or next(iter(_bundled(bags, "ranger_stepwise_*")), None)
+    route_files = args.ranger_routes or _bundled(bags, "ranger_route_*")
+    if not dyn_files or static_file is None:
+        raise InputDataError(f"{bags}: no information-robot recordings (temi_dynamic_*, temi_static_*)")
+
+    def log(msg: str) -> None:
+        if not args.json:
+            print(msg, flush=True)
+
+    summary: dict = {"paper": {k: v for k, v in PAPER.items() if k != "table2"}}
+    figures: dict = {}
+    temi = load_params(args.temi_params)
+    dyn = [trim_to_discharge(load_recording(f)) for f in dyn_files]
+    static = trim_to_discharge(load_recording(static_file))
+    runtime_params = temi
+    if "table2" not in args.skip:
+        log(f"Table 2: {len(args.base_sets)} parameter sets x 2 profiles, {args.trials} trials each ...")
+        rows = table2(temi, dyn[0], static, base_sets=args.base_sets, trials=args.trials, seed=args.seed,
+                      progress=lambda m: log("  " + m))
+        summary["table2"] = [{"opt_profile": r.opt_profile, "base_parameter_set": r.base_parameter_set,
+                              "opt_r2_mod": r.opt_r2_mod, "val_r2_mod": r.val_r2_mod,
+                              "parameters": list(r.parameters)} for r in rows]
+        figures["Fig. 4 kind: fit and validation"] = report.fig_fit(rows, dyn[0], static, out / "fig4_fit.png")
+        chosen = next((r for r in rows if r.base_parameter_set == "Chen2020" and r.opt_profile == "dynamic"
+                       and r.opt_result is not None), None)
+        if chosen is not None:
+            runtime_params = dataclasses.replace(chosen.params, source=str(out / "temi_fit_dynamic.yaml"))
+            runtime_params.to_yaml(out / "temi_fit_dynamic.yaml")
+    if "runtime" not in args.skip:
+        log(f"runtime evaluation on {len(dyn)} dynamic discharge(s) ...")
+        points = runtime_evaluation(runtime_params, dyn)
+        summary["runtime"] = runtime_summary(points)
+        summary["runtime_points"] = [dataclasses.asdict(p) for p in points]
+        figures["Fig. 5 kind: remaining runtime"] = report.fig_runtime(points, out / "fig5_runtime.png")
+        log(f"  MAE {summary['runtime']['mae_min']:.2f} min, MAPE {summary['runtime']['mape_pct']:.1f} % "
+            f"(paper {PAPER['runtime_mae_min']} min, {PAPER['runtime_mape_pct']} %)")
+    if "routes" not in args.skip and route_files:
+        ranger = load_params(args.ranger_params)
+        if step_file is not None:
+            step = trim_to_discharge(load_recording(step_file))
+            log(f"luggage robot: fitting the stepwise experiment ({args.trials} trials) ...")
+            ranger, _, _ = fit_pack(ranger, [step], trials=args.trials, seed=args.seed, screen_first=False)
+            score, res = _score(ranger, step)
+            summary["stepwise"] = {"r2_mod": score}
+            figures["Fig. 7 kind: stepwise experiment"] = report.fig_stepwise(step, res, score,
+                                                                              out / "fig7_stepwise.png")
+            ranger = dataclasses.replace(ranger, source=str(out / "ranger_fit_stepwise.yaml"))
+            ranger.to_yaml(out / "ranger_fit_stepwise.yaml")
+        log(f"route evaluation on {len(route_files)} recording(s) ...")
+        cases = route_evaluation(ranger, [load_recording(f) for f in route_files])
+        summary["routes"] = route_summary(cases)
+        summary["route_cases"] = [dataclasses.asdict(c) for c in cases]
+        figures["Fig. 8 kind: routes"] = report.fig_routes(cases, float(ranger.thresholds["route_min_voltage_v"]),
+                                                           out / "fig8_routes.png")
+        r = summary["routes"]
+        log(f"  MAE {r['mae_v']:.3f} V, MAPE {r['mape_pct']:.2f} % (paper {PAPER['route_mae_v']} V, "
+            f"{PAPER['route_mape_pct']} %); decisions {r['decisions_correct']}/{r['decisions']} correct, "
+            f"{r['unsafe_accepts']} unsafe")
+    md = report.write_markdown(out, summary, figures)
+    summary["seconds"] = time.perf_counter() - tic
+    summary["report"] = str(md)
+    if args.json:
+        print_json(summary)
+    else:
+        print(f"report: {md} ({summary['seconds']:.0f} s)")
+    return 0

@@ -1,0 +1,278 @@
+"""The seed paper's experiments (section 5), reproduced on recordings.
+
+- :func:`table2`: fit each base parameter set on one discharge, validate on the other (Table 2).
+- :func:`runtime_evaluation`: remaining runtime after 30, 60, ... min with the predictor's
+  strategy against the actual remaining runtime (5.1.6, Fig. 5).
+- :func:`route_evaluation`: voltage at the standstill current after each longest-route cycle,
+  and the accept/reject decisions, against the truth recorded in the bags (5.2.4, Fig. 8).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from battery_predictor.errors import BatteryPredictorError, InputDataError
+from battery_predictor.fitting.cost import r2_mod
+from battery_predictor.fitting.optimiser import TPEOptimiser
+from battery_predictor.fitting.problem import FitProblem, request_for_recording
+from battery_predictor.fitting.screening import relevant_names, screen
+from battery_predictor.fitting.space import fit_space
+from battery_predictor.params import PackParams
+from battery_predictor.recording import Recording
+from battery_predictor.simulation import get_simulator
+
+#: The paper's figures, printed beside ours.
+PAPER = {
+    "table2": {("dynamic", "Chen2020"): (0.97, 0.95), ("dynamic", "NCA_Kim2011"): (0.55, -0.61),
+               ("dynamic", "OKane2022"): (0.98, 0.93), ("static", "Chen2020"): (0.97, 0.94),
+               ("static", "NCA_Kim2011"): (-0.51, 0.55), ("static", "OKane2022"): (0.97, 0.92)},
+    "runtime_mae_min": 14.92, "runtime_mape_pct": 18.88,
+    "route_mae_v": 0.17, "route_mape_pct": 0.37,
+    "ranger_stepwise_r2_mod": 0.98,
+}
+#: Runtime checkpoints of 5.1.6, s.
+CHECKPOINTS_S = tuple(60.0 * m for m in range(30, 301, 30))
+
+
+@dataclass(frozen=True)
+class FitValidation:
+    """One row of Table 2."""
+
+    opt_profile: str
+    base_parameter_set: str
+    opt_r2_mod: float
+    val_r2_mod: float
+    parameters: tuple[str, ...]
+    params: PackParams = field(repr=False)
+    opt_result: object = field(repr=False, default=None)
+    val_result: object = field(repr=False, default=None)
+
+
+def _score(params: PackParams, rec: Recording):
+    sim = get_simulator("fast")
+    res = sim.simulate(params, request_for_recording(params, rec, initial_state="params",
+                                                     extend_s=0.2 * rec.duration_s))
+    return r2_mod(rec.relative_time_s, rec.voltage_v, res.time_s, res.pack_voltage_v), res
+
+
+def fit_pack(params: PackParams, recs: Sequence[Recording], *, trials: int, seed: int,
+             storage: str | None = None, screen_first: bool = True) -> tuple[PackParams, tuple[str, ...], object]:
+    """Screen (optional) and TPE-fit ``params`` to ``recs``; returns fitted params, names, optimiser result."""
+    names = tuple(params.fit.parameters)
+    if screen_first:
+        rows = screen(params, get_simulator("fast"))
+        names = tuple(n for n in relevant_names(rows) if n not in ("r_b_ohm", "r_c_ohm", "r_i_ohm"))
+        names = names + ("r_b_ohm", "r_c_ohm", "r_i_ohm")
+    problem = FitProblem(params, list(recs), get_simulator("fast"), initial_state="params")
+    result = TPEOptimiser(n_trials=trials, seed=seed, storage=storage, progress=False).run(
+        problem, fit_space(params, names))
+    return params.with_values(result.best_values), names, result
+
+
+def table2(start: PackParams, dynamic: Recording, static: Recording, *, base_sets: Sequence[str], trials: int,
+           seed: int = 0, progress=None) -> list[FitValidation]:
+    """Fit on the dynamic discharge and validate on the static one, and vice versa, per base set.
+
+    Every base set starts from the params' manual values (paper Table 1) without the shipped fit,
+    its fit parameters are the relevant ones of its own screening plus R_b, R_c, R_i.
+    """
+    rows = []
+    for base in base_sets:
+        params = dataclasses.replace(start, base_parameter_set=base, fitted={}, provenance={})
+        for opt_name, opt_rec, val_rec in (("dynamic", dynamic, static), ("static", static, dynamic)):
+            try:
+                fitted, names, _ = fit_pack(params, [opt_rec], trials=trials, seed=seed)
+                opt_r2, opt_res = _score(fitted, opt_rec)
+                val_r2, val_res = _score(fitted, val_rec)
+            except BatteryPredictorError as exc:
+                if progress:
+                    progress(f"{base} {opt_name}: failed: {exc}")
+                rows.append(FitValidation(opt_name, base, math.nan, math.nan, (), params))
+                continue
+            rows.append(FitValidation(opt_name, base, opt_r2, val_r2, names, fitted, opt_res, val_res))
+            if progress:
+                progress(f"{base} fitted on {opt_name}: R2_mod {opt_r2:.3f}, validation {val_r2:.3f}")
+    return rows
+
+
+@dataclass(frozen=True)
+class RuntimePoint:
+    """One checkpoint of the runtime evaluation."""
+
+    recording: str
+    elapsed_s: float
+    predicted_remaining_s: float
+    actual_remaining_s: float
+    valid: bool
+    reason: str
+
+    @property
+    def abs_error_min(self) -> float:
+        return abs(self.predicted_remaining_s - self.actual_remaining_s) / 60.0
+
+    @property
+    def abs_pct_error(self) -> float:
+        return 100.0 * abs(self.predicted_remaining_s - self.actual_remaining_s) / self.actual_remaining_s
+
+
+def actual_runtime_s(rec: Recording, cutoff_v: float) -> float:
+    """True runtime: from the bag's ground truth, else the first time the recorded voltage reaches ``cutoff_v``."""
+    truth = rec.metadata.get("truth") if isinstance(rec.metadata, dict) else None
+    if isinstance(truth, dict) and isinstance(truth.get("runtime_s"), (int, float)):
+        return float(truth["runtime_s"])
+    below = np.nonzero(rec.voltage_v <= cutoff_v)[0]
+    if below.size == 0:
+        raise InputDataError(f"{rec.source}: never reaches {cutoff_v:.2f} V and holds no ground-truth runtime")
+    return float(rec.relative_time_s[below[0]])
+
+
+def runtime_evaluation(params: PackParams, recs: Sequence[Recording], *, checkpoints_s=CHECKPOINTS_S,
+                       cutoff_v: float | None = None) -> list[RuntimePoint]:
+    """The predictor's strategy after 30, 60, ... min of each recording vs the actual remaining runtime."""
+    from battery_predictor.prediction.core import PredictorConfig, PredictorCore
+
+    cutoff = float(cutoff_v if cutoff_v is not None else params.thresholds["runtime_cutoff_voltage_v"])
+    points = []
+    for rec in recs:
+        t_true = actual_runtime_s(rec, cutoff)
+        core = PredictorCore(PredictorConfig(params_file=params.source, cutoff_voltage_v=cutoff,
+                                             stale_after_s=1e9), params=params)
+        t = rec.relative_time_s
+        temp = rec.temperature_k if rec.temperature_k is not None else np.full(t.size, math.nan)
+        k = 0
+        for cp in checkpoints_s:
+            if cp >= t_true:
+                break
+            while k < t.size and t[k] <= cp:
+                core.update_state(float(t[k]), float(rec.voltage_v[k]), float(rec.current_a[k]), float(temp[k]))
+                k += 1
+            st = core.remaining_runtime(float(t[k - 1]))
+            points.append(RuntimePoint(str(rec.source), cp, st.remaining_s if st.valid else math.nan,
+                                       t_true - float(t[k - 1]), st.valid, st.reason))
+    return points
+
+
+def runtime_summary(points: Sequence[RuntimePoint]) -> dict:
+    """MAE (min) and MAPE (%) per recording and overall (invalid predictions counted separately)."""
+    out: dict = {"per_recording": {}, "invalid": sum(not p.valid for p in points)}
+    valid = [p for p in points if p.valid and math.isfinite(p.predicted_remaining_s)]
+    for name in dict.fromkeys(p.recording for p in points):
+        sub = [p for p in valid if p.recording == name]
+        out["per_recording"][name] = {
+            "mae_min": float(np.mean([p.abs_error_min for p in sub])) if sub else math.nan,
+            "mape_pct": float(np.mean([p.abs_pct_error for p in sub])) if sub else math.nan,
+            "points": len(sub),
+        }
+    out["mae_min"] = float(np.mean([p.abs_error_min for p in valid])) if valid else math.nan
+    out["mape_pct"] = float(np.mean([p.abs_pct_error for p in valid])) if valid else math.nan
+    return out
+
+
+@dataclass(frozen=True)
+class RouteCase:
+    """Route evaluation of one luggage-robot recording."""
+
+    recording: str
+    payload_kg: float
+    predicted_v: tuple[float, float]
+    actual_v: tuple[float, float]
+    decisions: tuple[bool, bool, bool]
+    truth: tuple[bool, bool, bool]
+    reasons: tuple[str, str, str]
+
+
+def _state_before(rec: Recording, t_s: float, window_s: float = 30.0):
+    t = rec.relative_time_s
+    mask = (t > t_s - window_s) & (t <= t_s)
+    if not mask.any():
+        raise InputDataError(f"{rec.source}: no samples before {t_s:.0f} s")
+    temp = math.nan if rec.temperature_k is None else float(np.nanmean(rec.temperature_k[mask]))
+    return float(np.mean(rec.voltage_v[mask])), float(np.mean(rec.current_a[mask])), temp
+
+
+def route_evaluation(params: PackParams, recs: Sequence[Recording]) -> list[RouteCase]:
+    """Predicted vs recorded voltage at the standstill current after each of the two cycles.
+
+    The prediction starts from the state measured at the end of the first standstill (SOC
+    calibrated there) and simulates two cycles in succession with the average currents of each
+    (payload, slope), as the paper does; decisions are asked at the start, after cycle 1 and
+    after cycle 2 (each for one more longest route) and compared with the recorded truth.
+    """
+    from battery_predictor.prediction.calibration import calibrate_soc
+    from battery_predictor.prediction.cell_runner import PackRunner
+    from battery_predictor.prediction.route import evaluate_route, route_segments
+    from battery_predictor.profiles.ranger import longest_route
+
+    runner = PackRunner(params)
+    threshold = float(params.thresholds["route_min_voltage_v"])
+    i_stand = float(params.thresholds["standstill_current_a"])
+    cases = []
+    for rec in recs:
+        meta = rec.metadata if isinstance(rec.metadata, dict) else {}
+        truth, route_meta = meta.get("truth"), meta.get("route")
+        if not isinstance(truth, dict) or not isinstance(route_meta, dict):
+            raise InputDataError(f"{rec.source}: no route ground truth in the bag metadata")
+        payload = float(route_meta["payload_kg"])
+        period = float(truth["cycle_duration_s"])
+        standstill = float(truth["standstill_s"])
+        sections = longest_route(payload).sections
+        segs = route_segments(sections, i_stand)
+        # state at the end of the first standstill: the route proper starts there
+        v0, i0, temp0 = _state_before(rec, standstill)
+        temp0 = temp0 if math.isfinite(temp0) else params.ambient_temperature_k
+        soc0 = calibrate_soc(runner, v0, i0, temp0).soc
+        run = runner.run(soc0, segs[1:] + segs, temp0)
+        n1 = len(segs) - 1
+        ends = run.segment_end_index
+        t = run.time_s
+
+        pred = (_mean_before(t, run.pack_voltage_v, ends[n1 - 1], standstill) if len(ends) >= n1 else math.nan,
+                _mean_before(t, run.pack_voltage_v, ends[-1], standstill)
+                if len(ends) == len(segs) * 2 - 1 else math.nan)
+        actual = tuple(float(x) for x in truth["voltage_at_1_70_a_after_cycle_v"])
+        decisions, reasons = [], []
+        for t_state in (standstill, period, 2 * period):
+            v, i, temp = _state_before(rec, min(t_state, rec.relative_time_s[-1]))
+            temp = temp if math.isfinite(temp) else params.ambient_temperature_k
+            cal = calibrate_soc(runner, v, i, temp)
+            d = evaluate_route(runner, cal.soc, sections, temp, threshold_v=threshold, standstill_current_a=i_stand)
+            decisions.append(bool(d.accepted))
+            reasons.append(d.reason)
+        truth_dec = (actual[0] >= threshold, actual[1] >= threshold, bool(truth["further_cycle_stays_above_threshold"]))
+        cases.append(RouteCase(str(rec.source), payload, pred, actual, tuple(decisions), truth_dec, tuple(reasons)))
+    return cases
+
+
+def _mean_before(t: np.ndarray, v: np.ndarray, end_idx: int, window_s: float) -> float:
+    """Mean of ``v`` over the ``window_s`` seconds ending at sample ``end_idx``."""
+    t_end = t[end_idx]
+    m = (t >= t_end - window_s + 1e-6) & (t <= t_end + 1e-9)
+    return float(np.mean(v[m]))
+
+
+def route_summary(cases: Sequence[RouteCase]) -> dict:
+    """MAE (V), MAPE (%) per cycle and overall, and decision accuracy."""
+    errs = {1: [], 2: []}
+    for c in cases:
+        for k in (1, 2):
+            p, a = c.predicted_v[k - 1], c.actual_v[k - 1]
+            if math.isfinite(p) and math.isfinite(a):
+                errs[k].append((abs(p - a), 100.0 * abs(p - a) / a))
+    allv = errs[1] + errs[2]
+    n_dec = sum(len(c.decisions) for c in cases)
+    correct = sum(d == t for c in cases for d, t in zip(c.decisions, c.truth))
+    unsafe = sum(d and not t for c in cases for d, t in zip(c.decisions, c.truth))
+    return {
+        "mae_v": float(np.mean([e[0] for e in allv])) if allv else math.nan,
+        "mape_pct": float(np.mean([e[1] for e in allv])) if allv else math.nan,
+        "mae_v_cycle1": float(np.mean([e[0] for e in errs[1]])) if errs[1] else math.nan,
+        "mae_v_cycle2": float(np.mean([e[0] for e in errs[2]])) if errs[2] else math.nan,
+        "bias_v_cycle1": float(np.mean([c.predicted_v[0] - c.actual_v[0] for c in cases])) if cases else math.nan,
+        "bias_v_cycle2": float(np.mean([c.predicted_v[1] - c.actual_v[1] for c in cases])) if cases else math.nan,
+        "decisions": n_dec, "decisions_correct": correct, "unsafe_accepts": unsafe,
+    }

@@ -1,0 +1,157 @@
+"""Markdown report with PNG figures of the Fig. 4, 5, 7, 8 kind and the tables."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from battery_predictor.evaluation.paper_eval import PAPER  # noqa: E402
+
+
+def _fmt(x, nd=2) -> str:
+    return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
+
+
+def fig_fit(rows, dynamic, static, out: Path, base: str = "Chen2020") -> Path | None:
+    """Fig. 4 kind: measured vs simulated on both profiles for the model fitted on the dynamic one."""
+    row = next((r for r in rows if r.base_parameter_set == base and r.opt_profile == "dynamic"
+                and r.opt_result is not None), None)
+    if row is None:
+        return None
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+    for ax, (label, res, rec, score) in zip(axes, (("dynamic (fit)", row.opt_result, dynamic, row.opt_r2_mod),
+                                                   ("static (validation)", row.val_result, static,
+                                                    row.val_r2_mod))):
+        ax.plot(rec.relative_time_s / 60, rec.voltage_v, "k", lw=1, label="measured")
+        ax.plot(res.time_s / 60, res.pack_voltage_v, "r--", lw=1, label="simulated")
+        ax.set_ylim(min(rec.voltage_v) - 0.3, max(rec.voltage_v) + 0.3)
+        ax.set_title(f"{label}: R2_mod {score:.3f}", fontsize=9)
+        ax.set_xlabel("time [min]")
+        ax.set_ylabel("pack voltage [V]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"Information robot, {base} fitted on the dynamic discharge (cf. paper Fig. 4)")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def fig_runtime(points, out: Path) -> Path:
+    """Fig. 5 kind: predicted vs actual remaining runtime per pack at each checkpoint."""
+    fig, ax = plt.subplots(figsize=(8, 4))
+    names = list(dict.fromkeys(p.recording for p in points))
+    for k, name in enumerate(names):
+        sub = [p for p in points if p.recording == name]
+        c = f"C{k}"
+        ax.plot([p.elapsed_s / 60 for p in sub], [p.actual_remaining_s / 60 for p in sub], "-", color=c, lw=1)
+        ax.plot([p.elapsed_s / 60 for p in sub], [p.predicted_remaining_s / 60 for p in sub], "o", color=c,
+                label=Path(name).name)
+    ax.set_xlabel("elapsed runtime [min]")
+    ax.set_ylabel("remaining runtime [min]")
+    ax.set_title("Remaining runtime: predicted (dots) vs actual (lines) (cf. paper Fig. 5)", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def fig_stepwise(rec, res, score: float, out: Path) -> Path:
+    """Fig. 7 kind: luggage robot stepwise experiment, measured vs fitted model."""
+    fig, ax = plt.subplots(figsize=(9, 3.6))
+    ax.plot(rec.relative_time_s / 60, rec.voltage_v, "k", lw=1, label="measured")
+    ax.plot(res.time_s / 60, res.pack_voltage_v, "r--", lw=1, label="simulated")
+    ax.set_ylim(min(rec.voltage_v) - 0.5, max(rec.voltage_v) + 0.5)
+    ax.set_xlabel("time [min]")
+    ax.set_ylabel("pack voltage [V]")
+    ax.set_title(f"Luggage robot stepwise experiment: R2_mod {score:.3f} (cf. paper Fig. 7)", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def fig_routes(cases, threshold_v: float, out: Path) -> Path:
+    """Fig. 8 kind: predicted vs recorded voltage at 1.70 A after cycle 1 and 2, per payload."""
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for k, c in enumerate(cases):
+        x = [1 + 0.02 * k, 2 + 0.02 * k]
+        ax.plot(x, c.actual_v, "o-", color=f"C{int(c.payload_kg) // 20 - 1}", lw=0.8)
+        ax.plot(x, c.predicted_v, "x--", color=f"C{int(c.payload_kg) // 20 - 1}", lw=0.8)
+    for payload in (20, 40, 60, 80):
+        ax.plot([], [], "s", color=f"C{payload // 20 - 1}", label=f"{payload} kg")
+    ax.plot([], [], "ko-", label="recorded")
+    ax.plot([], [], "kx--", label="predicted")
+    ax.axhline(threshold_v, color="r", lw=1, label=f"threshold {threshold_v:.2f} V")
+    ax.set_xticks([1, 2], ["after cycle 1", "after cycle 2"])
+    ax.set_ylabel("pack voltage at 1.70 A [V]")
+    ax.set_title("Luggage robot: voltage after each longest-route cycle (cf. paper Fig. 8)", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def write_markdown(out_dir: Path, summary: dict, figures: dict[str, Path]) -> Path:
+    """The report: tables with the paper's figures beside ours, and the figures."""
+    lines = ["# Evaluation as in the seed paper (section 5)", "",
+             "All recordings are the bundled **emulated** ones unless other files were given "
+             "(see `bags/README.md`).", ""]
+    if "table2" in summary:
+        lines += ["## Information robot: optimisation and validation (Table 2)", "",
+                  "| opt. profile | parameter set | opt. R2_mod | val. R2_mod | paper opt. | paper val. |",
+                  "|---|---|---|---|---|---|"]
+        for r in summary["table2"]:
+            p = PAPER["table2"].get((r["opt_profile"], r["base_parameter_set"]), (None, None))
+            lines.append(f"| {r['opt_profile']} | {r['base_parameter_set']} | {_fmt(r['opt_r2_mod'])} | "
+                         f"{_fmt(r['val_r2_mod'])} | {_fmt(p[0])} | {_fmt(p[1])} |")
+        lines.append("")
+    if "runtime" in summary:
+        rt = summary["runtime"]
+        lines += ["## Information robot: remaining runtime (5.1.6)", "",
+                  "| recording | MAE [min] | MAPE [%] | checkpoints |", "|---|---|---|---|"]
+        for name, v in rt["per_recording"].items():
+            lines.append(f"| {Path(name).name} | {_fmt(v['mae_min'])} | {_fmt(v['mape_pct'])} | {v['points']} |")
+        lines.append(f"| **overall** | **{_fmt(rt['mae_min'])}** | **{_fmt(rt['mape_pct'])}** | |")
+        lines.append(f"| paper | {PAPER['runtime_mae_min']} | {PAPER['runtime_mape_pct']} | |")
+        lines.append("")
+    if "stepwise" in summary:
+        lines += ["## Luggage robot: stepwise experiment fit (5.2.3)", "",
+                  f"R2_mod {_fmt(summary['stepwise']['r2_mod'], 3)} (paper: {PAPER['ranger_stepwise_r2_mod']}).", ""]
+    if "routes" in summary:
+        r = summary["routes"]
+        lines += ["## Luggage robot: voltage after the longest route (5.2.4)", "",
+                  "| | MAE [V] | MAPE [%] | bias cycle 1 [V] | bias cycle 2 [V] |", "|---|---|---|---|---|",
+                  f"| ours | {_fmt(r['mae_v'])} | {_fmt(r['mape_pct'])} | {_fmt(r['bias_v_cycle1'])} | "
+                  f"{_fmt(r['bias_v_cycle2'])} |",
+                  f"| paper | {PAPER['route_mae_v']} | {PAPER['route_mape_pct']} | overestimated | underestimated |",
+                  "", f"Decisions (one more longest route, asked at the start, after cycle 1 and after cycle 2): "
+                  f"{r['decisions_correct']} of {r['decisions']} match the truth; {r['unsafe_accepts']} unsafe "
+                  "accepts (accepted although the recorded voltage fell below the threshold).", ""]
+        if summary.get("route_cases"):
+            lines += ["| recording | payload [kg] | predicted / recorded after cycle 1 [V] | after cycle 2 [V] | "
+                      "decisions (ours / truth) |", "|---|---|---|---|---|"]
+            for c in summary["route_cases"]:
+                dec = "".join("A" if d else "R" for d in c["decisions"])
+                tru = "".join("A" if d else "R" for d in c["truth"])
+                lines.append(f"| {Path(c['recording']).name} | {c['payload_kg']:.0f} | {_fmt(c['predicted_v'][0])} / "
+                             f"{_fmt(c['actual_v'][0])} | {_fmt(c['predicted_v'][1])} / {_fmt(c['actual_v'][1])} | "
+                             f"{dec} / {tru} |")
+            lines.append("")
+    for title, path in figures.items():
+        if path is not None:
+            lines += [f"![{title}]({path.name})", ""]
+    out = out_dir / "report.md"
+    out.write_text("\n".join(lines))
+    return out
