@@ -186,29 +186,21 @@ class RouteCase:
     reasons: tuple[str, str, str]
 
 
-def _state_before(rec: Recording, t_s: float, window_s: float = 30.0):
-    t = rec.relative_time_s
-    mask = (t > t_s - window_s) & (t <= t_s)
-    if not mask.any():
-        raise InputDataError(f"{rec.source}: no samples before {t_s:.0f} s")
-    temp = math.nan if rec.temperature_k is None else float(np.nanmean(rec.temperature_k[mask]))
-    return float(np.mean(rec.voltage_v[mask])), float(np.mean(rec.current_a[mask])), temp
-
-
 def route_evaluation(params: PackParams, recs: Sequence[Recording]) -> list[RouteCase]:
     """Predicted vs recorded voltage at the standstill current after each of the two cycles.
 
-    The prediction starts from the state measured at the end of the first standstill (SOC
-    calibrated there) and simulates two cycles in succession with the average currents of each
-    (payload, slope), as the paper does; decisions are asked at the start, after cycle 1 and
-    after cycle 2 (each for one more longest route) and compared with the recorded truth.
+    The prediction starts from the state calibrated (as the predictor node does) at the end of
+    the first standstill and simulates two cycles in succession with the average currents of each
+    (payload, slope), as the paper does; decisions are asked of :class:`PredictorCore` at the
+    start, after cycle 1 and after cycle 2 (each for one more longest route) and compared with
+    the recorded truth.
     """
-    from battery_predictor.prediction.calibration import calibrate_soc
-    from battery_predictor.prediction.cell_runner import PackRunner
-    from battery_predictor.prediction.route import evaluate_route, route_segments
+    from battery_predictor.prediction.core import PredictorConfig, PredictorCore
+    from battery_predictor.prediction.route import route_segments
     from battery_predictor.profiles.ranger import longest_route
 
-    runner = PackRunner(params)
+    template = PredictorCore(PredictorConfig(params_file=params.source, stale_after_s=1e9), params=params)
+    runner = template.runner
     threshold = float(params.thresholds["route_min_voltage_v"])
     i_stand = float(params.thresholds["standstill_current_a"])
     cases = []
@@ -222,11 +214,14 @@ def route_evaluation(params: PackParams, recs: Sequence[Recording]) -> list[Rout
         standstill = float(truth["standstill_s"])
         sections = longest_route(payload).sections
         segs = route_segments(sections, i_stand)
+        core = PredictorCore(template.config, params=params)
+        core.runner = runner  # share the built model
+        feeder = _Feeder(core, rec)
+        t_rec = rec.relative_time_s
         # state at the end of the first standstill: the route proper starts there
-        v0, i0, temp0 = _state_before(rec, standstill)
-        temp0 = temp0 if math.isfinite(temp0) else params.ambient_temperature_k
-        soc0 = calibrate_soc(runner, v0, i0, temp0).soc
-        run = runner.run(soc0, segs[1:] + segs, temp0)
+        feeder.until(standstill)
+        temp0 = core._temperature(core.latest_state()[3])
+        run = runner.run(core.calibration(temp0).start, segs[1:] + segs, temp0)
         n1 = len(segs) - 1
         ends = run.segment_end_index
         t = run.time_s
@@ -237,15 +232,31 @@ def route_evaluation(params: PackParams, recs: Sequence[Recording]) -> list[Rout
         actual = tuple(float(x) for x in truth["voltage_at_1_70_a_after_cycle_v"])
         decisions, reasons = [], []
         for t_state in (standstill, period, 2 * period):
-            v, i, temp = _state_before(rec, min(t_state, rec.relative_time_s[-1]))
-            temp = temp if math.isfinite(temp) else params.ambient_temperature_k
-            cal = calibrate_soc(runner, v, i, temp)
-            d = evaluate_route(runner, cal.soc, sections, temp, threshold_v=threshold, standstill_current_a=i_stand)
+            now = feeder.until(min(t_state, float(t_rec[-1])))
+            d = core.can_accept_route(sections, now)
             decisions.append(bool(d.accepted))
             reasons.append(d.reason)
         truth_dec = (actual[0] >= threshold, actual[1] >= threshold, bool(truth["further_cycle_stays_above_threshold"]))
         cases.append(RouteCase(str(rec.source), payload, pred, actual, tuple(decisions), truth_dec, tuple(reasons)))
     return cases
+
+
+class _Feeder:
+    """Feeds a recording's samples into a PredictorCore up to a time, like the monitor would."""
+
+    def __init__(self, core, rec: Recording) -> None:
+        self.core, self.rec, self.k = core, rec, 0
+        self.t = rec.relative_time_s
+        self.temp = rec.temperature_k if rec.temperature_k is not None else np.full(self.t.size, math.nan)
+
+    def until(self, t_s: float) -> float:
+        """Feed every sample at or before ``t_s``; returns the last fed time (s)."""
+        while self.k < self.t.size and self.t[self.k] <= t_s + 1e-9:
+            k = self.k
+            self.core.update_state(float(self.t[k]), float(self.rec.voltage_v[k]), float(self.rec.current_a[k]),
+                                   float(self.temp[k]))
+            self.k += 1
+        return float(self.t[max(self.k - 1, 0)])
 
 
 def _mean_before(t: np.ndarray, v: np.ndarray, end_idx: int, window_s: float) -> float:

@@ -29,6 +29,28 @@ _T_INIT = "Initial temperature [K]"
 
 
 @dataclass(frozen=True)
+class RunState:
+    """The model state at the end of a run, to continue from (keeps concentration gradients).
+
+    Attributes
+    ----------
+    solution : object
+        The PyBaMM solution whose last state is continued.
+    base_inputs : dict
+        The ``[input]`` values the run used (initial concentrations of its start, temperature).
+    soc_start : float
+        SOC the run started from.
+    charge_ah : float
+        Net charge drawn since then, Ah (positive = discharge).
+    """
+
+    solution: object
+    base_inputs: dict
+    soc_start: float
+    charge_ah: float
+
+
+@dataclass(frozen=True)
 class SegmentRun:
     """Result of running a sequence of constant-current segments.
 
@@ -46,6 +68,8 @@ class SegmentRun:
         True when a cell reached its lower cut-off before the end.
     end_time_s : float
         Time in s at which the run ended.
+    final_state : RunState or None
+        State at the end, to continue from.
     """
 
     time_s: np.ndarray
@@ -54,6 +78,7 @@ class SegmentRun:
     segment_end_index: list[int]
     reached_cutoff: bool
     end_time_s: float
+    final_state: RunState | None = None
 
 
 class PackRunner:
@@ -104,6 +129,21 @@ class PackRunner:
         return float(x0), float(x100), float(y100), float(y0)
 
     @cached_property
+    def soc_bounds(self) -> tuple[float, float]:
+        """Widest SOC range whose stoichiometries stay inside (0, 1) with a 2 % margin.
+
+        SOC here is PyBaMM's linear coordinate between the 0 % and 100 % OCV points
+        (``Open-circuit voltage at 0%/100% SOC``); a pack may be used beyond them (e.g. below
+        0 % when the robot's cut-off is lower than the 0 % OCV), so states outside 0..1 are valid.
+        """
+        x0, x100, y100, y0 = self.stoichiometry_window
+        margin = 0.02
+        dx, dy = x100 - x0, y0 - y100
+        lows = [(margin - x0) / dx if dx > 0 else -0.5, (y0 - (1 - margin)) / dy if dy > 0 else -0.5]
+        highs = [((1 - margin) - x0) / dx if dx > 0 else 1.5, (y0 - margin) / dy if dy > 0 else 1.5]
+        return max(-0.5, max(lows)), min(1.5, min(highs))
+
+    @cached_property
     def capacity_ah(self) -> float:
         """Pack capacity between 0 % and 100 % SOC in Ah (from the negative electrode window)."""
         pv = self._pv_numeric
@@ -122,21 +162,30 @@ class PackRunner:
         return (x0 + soc * (x100 - x0)) * c_n, (y0 - soc * (y0 - y100)) * c_p
 
     # ------------------------------------------------------------------- runs
-    def run(self, soc: float, segments, temperature_k: float) -> SegmentRun:
-        """Run ``segments`` = [(duration_s, pack_current_a), ...] from ``soc`` at ``temperature_k``.
+    def run(self, start: float | RunState, segments, temperature_k: float) -> SegmentRun:
+        """Run ``segments`` = [(duration_s, pack_current_a), ...] at ``temperature_k``.
 
+        ``start`` is a SOC (uniform, relaxed particles) or a :class:`RunState` to continue from.
         Stops early when a cell reaches its lower cut-off.
         """
         import pybamm
 
-        if not (0.0 <= soc <= 1.0) or not np.isfinite(soc):
-            raise SimulationError(f"SOC must be within 0..1, got {soc}")
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
             raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
-        c_n0, c_p0 = self.concentrations(soc)
-        base = {_C_N0: c_n0, _C_P0: c_p0, _T_AMB: float(temperature_k), _T_INIT: float(temperature_k)}
+        if isinstance(start, RunState):
+            sol, soc_start, charge0 = start.solution, start.soc_start, start.charge_ah
+            base = dict(start.base_inputs)
+            base[_T_AMB] = float(temperature_k)
+        else:
+            soc = float(start)
+            lo, hi = self.soc_bounds
+            if not np.isfinite(soc) or not (lo - 1e-9 <= soc <= hi + 1e-9):
+                raise SimulationError(f"SOC must be within {lo:.3f}..{hi:.3f} for this model, got {soc}")
+            c_n0, c_p0 = self.concentrations(soc)
+            base = {_C_N0: c_n0, _C_P0: c_p0, _T_AMB: float(temperature_k), _T_INIT: float(temperature_k)}
+            sol, soc_start, charge0 = None, soc, 0.0
         times, volts, amps, ends = [], [], [], []
-        t0, sol, cutoff = 0.0, None, False
+        t0, cutoff, charge_as = 0.0, False, 0.0
         with self._lock, quiet_pybamm():
             for duration_s, current_a in segments:
                 duration_s, current_a = float(duration_s), float(current_a)
@@ -161,15 +210,21 @@ class PackRunner:
                 amps.append(np.full(t_seg.size, current_a))
                 ends.append(sum(len(x) for x in times) - 1)
                 t0 += float(t_seg[-1])
+                charge_as += float(t_seg[-1]) * current_a
                 sol = new
                 if new.termination and "Minimum voltage" in str(new.termination) or t_seg[-1] < duration_s - 1e-6:
                     cutoff = True
                     ends.pop()
                     break
             self._sim._solution = None
+        final = None if sol is None else RunState(sol, base, soc_start, charge0 + charge_as / 3600.0)
         return SegmentRun(time_s=np.concatenate(times), pack_voltage_v=np.concatenate(volts),
                           pack_current_a=np.concatenate(amps), segment_end_index=ends, reached_cutoff=cutoff,
-                          end_time_s=t0)
+                          end_time_s=t0, final_state=final)
+
+    def soc_of(self, state: RunState) -> float:
+        """SOC of a continued state (start SOC minus the charge drawn over the capacity)."""
+        return state.soc_start - state.charge_ah / self.capacity_ah
 
     def settled_voltage_v(self, soc: float, current_a: float, temperature_k: float, settle_s: float = 60.0) -> float:
         """Pack voltage (V) after ``settle_s`` at a constant ``current_a`` from ``soc``; NaN past cut-off."""

@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import math
 import threading
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.params import PackParams, load_params
-from battery_predictor.prediction.calibration import calibrate_soc
+from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, history_segments
 from battery_predictor.prediction.cell_runner import PackRunner
 from battery_predictor.prediction.route import RouteDecision, evaluate_route, rejected
 from battery_predictor.prediction.runtime import predict_remaining_runtime
@@ -52,6 +55,10 @@ class PredictorConfig:
         Temperature used when none is measured; NaN = params ambient.
     route_currents_file : str
         Ranger per-(payload, slope) current samples (empty = shipped default).
+    calibration_window_s : float
+        History the SOC calibration simulates (0 = calibrate on the latest sample only, as the paper).
+    recalibrate_after_s : float
+        Between full calibrations the calibrated state is propagated with the measured current.
     """
 
     params_file: str
@@ -62,6 +69,8 @@ class PredictorConfig:
     charge_current_a: float = 0.2
     default_temperature_k: float = math.nan
     route_currents_file: str = ""
+    calibration_window_s: float = 600.0
+    recalibrate_after_s: float = 60.0
 
 
 @dataclass(frozen=True)
@@ -124,6 +133,9 @@ class PredictorCore:
         self.config = config
         self._lock = threading.Lock()
         self._state: tuple[float, float, float, float] | None = None
+        self._history: deque[tuple[float, float, float, float]] = deque()
+        self._cal_lock = threading.Lock()
+        self._cal: tuple[float, float, Calibration] | None = None  # (stamp, full-calibration stamp, cal)
         self._cycle = _CycleAverage(config.charge_current_a)
         self.model_error = ""
         self.params: PackParams | None = None
@@ -159,6 +171,10 @@ class PredictorCore:
                 return
             self._state = (stamp_s, voltage_v, current_a, temperature_k)
             self._cycle.add(stamp_s, current_a)
+            self._history.append(self._state)
+            horizon = max(self.config.calibration_window_s, 60.0) + 120.0
+            while self._history and self._history[0][0] < stamp_s - horizon:
+                self._history.popleft()
 
     def latest_state(self) -> tuple[float, float, float, float] | None:
         """(stamp_s, voltage_v, current_a, temperature_k) of the latest state, or None."""
@@ -175,6 +191,45 @@ class PredictorCore:
         if age > self.config.stale_after_s:
             return STATUS_STALE_INPUT, f"pack state is stale ({age:.1f} s old, limit {self.config.stale_after_s:.0f} s)", state
         return STATUS_OK, "", state
+
+    def calibration(self, temperature_k: float) -> Calibration:
+        """Calibrated present state (cached; propagated between full calibrations).
+
+        Raises
+        ------
+        BatteryPredictorError
+            When the model fails.
+        """
+        with self._cal_lock:
+            with self._lock:
+                hist = list(self._history)
+            if not hist:
+                raise BatteryPredictorError("no pack state to calibrate on")
+            stamp = hist[-1][0]
+            cached = self._cal
+            if cached is not None and cached[0] == stamp:
+                return cached[2]
+            if (cached is not None and cached[2].state is not None
+                    and stamp - cached[1] < self.config.recalibrate_after_s and stamp > cached[0]):
+                newer = [h for h in hist if h[0] >= cached[0]]
+                if len(newer) >= 2:
+                    t = np.array([h[0] for h in newer])
+                    i = np.array([h[2] for h in newer])
+                    run = self.runner.run(cached[2].state, history_segments(t, i, max_segments=8), temperature_k)
+                    if run.final_state is not None and not run.reached_cutoff:
+                        v_sim = float(run.pack_voltage_v[-1])
+                        cal = Calibration(self.runner.soc_of(run.final_state), v_sim - hist[-1][1], "",
+                                          run.final_state)
+                        self._cal = (stamp, cached[1], cal)
+                        return cal
+            t = np.array([h[0] for h in hist])
+            v = np.array([h[1] for h in hist])
+            i = np.array([h[2] for h in hist])
+            window = self.config.calibration_window_s
+            cal = calibrate_on_history(self.runner, t, v, i, temperature_k, window_s=max(window, 1.0)) if window > 0 \
+                else calibrate_on_history(self.runner, t[-1:], v[-1:], i[-1:], temperature_k)
+            self._cal = (stamp, stamp, cal)
+            return cal
 
     def _temperature(self, temperature_k: float) -> float:
         return temperature_k if math.isfinite(temperature_k) and 200 < temperature_k < 400 else \
@@ -196,7 +251,8 @@ class PredictorCore:
             return RuntimeStatus(stamp, 0.0, avg, temp, math.nan, cutoff, True, STATUS_BELOW_CUTOFF,
                                  f"pack voltage {v:.2f} V is at or below the cut-off {cutoff:.2f} V")
         try:
-            pred = predict_remaining_runtime(self.runner, v, i, temp, avg, cutoff)
+            pred = predict_remaining_runtime(self.runner, v, i, temp, avg, cutoff,
+                                             calibration=self.calibration(temp))
         except BatteryPredictorError as exc:
             return RuntimeStatus(stamp, math.nan, avg, temp, math.nan, cutoff, False, STATUS_MODEL_FAILED,
                                  f"model failed: {exc}")
@@ -218,13 +274,13 @@ class PredictorCore:
         _, v, i, t_k = state
         temp = self._temperature(t_k)
         try:
-            cal = calibrate_soc(self.runner, v, i, temp)
+            cal = self.calibration(temp)
         except BatteryPredictorError as exc:
             return rejected(f"model failed while calibrating: {exc}", threshold)
         if cal.clipped == "below_empty":
             return rejected(f"pack voltage {v:.2f} V at {i:.2f} A is below the model's empty state", threshold,
-                            soc=0.0)
-        decision = evaluate_route(self.runner, cal.soc, sections, temp, threshold_v=threshold,
+                            soc=cal.soc)
+        decision = evaluate_route(self.runner, cal.start, sections, temp, threshold_v=threshold,
                                   standstill_current_a=self.standstill_current_a, currents=self._currents)
         notes = []
         if starts_away_from_charger:

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from battery_predictor.errors import BatteryPredictorError, RequestError
-from battery_predictor.prediction.cell_runner import PackRunner
+from battery_predictor.prediction.cell_runner import PackRunner, RunState
 from battery_predictor.profiles.ranger import RangerCurrents, RouteSection, mean_current_a
 
 #: Standstill after the route at which the voltage is read, s (the paper's final curve point).
@@ -79,17 +79,17 @@ def rejected(reason: str, threshold_v: float, *, duration_s: float = math.nan, c
     return RouteDecision(False, math.nan, threshold_v, math.nan, duration_s, charge_ah, soc, reason)
 
 
-def evaluate_route(runner: PackRunner, soc: float, sections: Sequence[RouteSection], temperature_k: float, *,
-                   threshold_v: float, standstill_current_a: float, currents: RangerCurrents | None = None,
-                   settle_s: float = SETTLE_S) -> RouteDecision:
-    """Simulate a route from ``soc`` and decide (never raises for a bad route: rejects with a reason).
+def evaluate_route(runner: PackRunner, start: float | RunState, sections: Sequence[RouteSection],
+                   temperature_k: float, *, threshold_v: float, standstill_current_a: float,
+                   currents: RangerCurrents | None = None, settle_s: float = SETTLE_S) -> RouteDecision:
+    """Simulate a route from ``start`` and decide (never raises for a bad route: rejects with a reason).
 
     Parameters
     ----------
     runner : PackRunner
         The fitted pack model.
-    soc : float
-        Calibrated SOC at the start.
+    start : float or RunState
+        Calibrated SOC, or the calibrated model state (see ``Calibration.start``).
     sections : sequence of RouteSection
         The route (validated dataclasses).
     temperature_k : float
@@ -97,6 +97,7 @@ def evaluate_route(runner: PackRunner, soc: float, sections: Sequence[RouteSecti
     threshold_v, standstill_current_a : float
         Acceptance threshold (V) and the standstill current (A) it applies at.
     """
+    soc = runner.soc_of(start) if isinstance(start, RunState) else float(start)
     try:
         segments = route_segments(sections, standstill_current_a, currents)
     except BatteryPredictorError as exc:
@@ -111,7 +112,7 @@ def evaluate_route(runner: PackRunner, soc: float, sections: Sequence[RouteSecti
         return rejected(f"route draws {charge_ah:.1f} Ah, more than the full pack holds ({runner.capacity_ah:.1f} Ah)",
                         threshold_v, duration_s=duration_s, charge_ah=charge_ah, soc=soc)
     try:
-        run = runner.run(soc, [*segments, (settle_s, standstill_current_a)], temperature_k)
+        run = runner.run(start, [*segments, (settle_s, standstill_current_a)], temperature_k)
     except BatteryPredictorError as exc:
         return rejected(f"model failed: {exc}", threshold_v, duration_s=duration_s, charge_ah=charge_ah, soc=soc)
     if run.reached_cutoff:

@@ -60,8 +60,9 @@ def time_to_voltage_s(time_s: np.ndarray, voltage_v: np.ndarray, threshold_v: fl
 
 
 def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: float, temperature_k: float,
-                              average_current_a: float, cutoff_voltage_v: float) -> RuntimePrediction:
-    """Calibrate the SOC on the latest sample, then simulate the average load to the cut-off.
+                              average_current_a: float, cutoff_voltage_v: float,
+                              calibration: Calibration | None = None) -> RuntimePrediction:
+    """Calibrate the SOC (unless given), then simulate the average load to the cut-off.
 
     Parameters
     ----------
@@ -73,15 +74,17 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
         Average discharge current of the present cycle in A (> 0).
     cutoff_voltage_v : float
         Pack voltage at which the robot stops (V).
+    calibration : Calibration, optional
+        An existing calibration of the present state (e.g. on history); else calibrated on the sample.
     """
     if not (math.isfinite(average_current_a) and average_current_a > 0):
         raise SimulationError(f"average discharge current must be > 0 A, got {average_current_a}")
-    cal = calibrate_soc(runner, voltage_v, current_a, temperature_k)
+    cal = calibration if calibration is not None else calibrate_soc(runner, voltage_v, current_a, temperature_k)
     if voltage_v <= cutoff_voltage_v:
         return RuntimePrediction(0.0, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
-    charge_left_ah = max(cal.soc, 0.02) * runner.capacity_ah
+    charge_left_ah = max(cal.soc - runner.soc_bounds[0], 0.02) * runner.capacity_ah
     horizon_s = min(MAX_HORIZON_S, 1.5 * charge_left_ah * 3600.0 / average_current_a + 3600.0)
-    run = runner.run(cal.soc, [(horizon_s, average_current_a)], temperature_k)
+    run = runner.run(cal.start, [(horizon_s, average_current_a)], temperature_k)
     t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
     if t_pack is not None:
         return RuntimePrediction(t_pack, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")

@@ -132,3 +132,28 @@ def test_core_runtime_uses_the_discharge_cycle_average_and_resets_on_charge():
     core.update_state(120.0, 15.9, 1.0, 298.15)
     assert core.remaining_runtime(121.0).assumed_current_a == pytest.approx(1.0)
     assert math.isfinite(core.remaining_runtime(121.0).remaining_s)
+
+
+def test_history_calibration_carries_polarisation_and_beats_single_sample(temi_runner):
+    from battery_predictor.prediction.calibration import calibrate_on_history
+
+    segs = [(120.0, 9.0), (60.0, 1.0), (180.0, 12.0), (60.0, 2.0), (180.0, 10.0)]
+    run = temi_runner.run(0.55, segs, 298.15)
+    true_soc = temi_runner.soc_of(run.final_state)
+    t = np.arange(0.0, run.time_s[-1], 5.0)
+    v = np.interp(t, run.time_s, run.pack_voltage_v)
+    i = np.interp(t, run.time_s, run.pack_current_a)
+    hist = calibrate_on_history(temi_runner, t, v, i, 298.15)
+    single = calibrate_soc(temi_runner, float(v[-1]), float(i[-1]), 298.15)
+    assert hist.state is not None
+    assert abs(hist.soc - true_soc) < 0.005
+    assert abs(hist.soc - true_soc) < abs(single.soc - true_soc)
+
+
+def test_soc_bounds_extend_beyond_0_and_1_within_stoichiometry(temi_runner):
+    lo, hi = temi_runner.soc_bounds
+    assert lo < 0.0 < 1.0 <= hi
+    x0, x100, y100, y0 = temi_runner.stoichiometry_window
+    for soc in (lo, hi):
+        c_n, c_p = temi_runner.concentrations(soc)
+        assert 0 < c_n and 0 < c_p
