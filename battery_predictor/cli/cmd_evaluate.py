@@ -61,8 +61,11 @@ def run(args) -> int:
     static_file = args.temi_static or next(iter(_bundled(bags, "temi_static_*")), None)
     step_file = args.ranger_stepwise or next(iter(_bundled(bags, "ranger_stepwise_*")), None)
     route_files = args.ranger_routes or _bundled(bags, "ranger_route_*")
-    if not dyn_files or static_file is None:
+    need_temi = "table2" not in args.skip or "runtime" not in args.skip
+    if need_temi and (not dyn_files or ("table2" not in args.skip and static_file is None)):
         raise InputDataError(f"{bags}: no information-robot recordings (temi_dynamic_*, temi_static_*)")
+    if "routes" not in args.skip and not route_files:
+        raise InputDataError(f"{bags}: no luggage-robot route recordings (ranger_route_*)")
 
     def log(msg: str) -> None:
         if not args.json:
@@ -71,8 +74,8 @@ def run(args) -> int:
     summary: dict = {"paper": {k: v for k, v in PAPER.items() if k != "table2"}}
     figures: dict = {}
     temi = load_params(args.temi_params)
-    dyn = [trim_to_discharge(load_recording(f)) for f in dyn_files]
-    static = trim_to_discharge(load_recording(static_file))
+    dyn = [trim_to_discharge(load_recording(f)) for f in dyn_files] if need_temi else []
+    static = trim_to_discharge(load_recording(static_file)) if "table2" not in args.skip else None
     runtime_params = temi
     if "table2" not in args.skip:
         log(f"Table 2: {len(args.base_sets)} parameter sets x 2 profiles, {args.trials} trials each ...")

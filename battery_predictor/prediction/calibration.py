@@ -96,18 +96,28 @@ def calibrate_soc(runner: PackRunner, voltage_v: float, current_a: float, temper
         Length of the short simulation in s.
     """
     _check_finite(voltage=voltage_v, current=current_a, temperature=temperature_k)
+    holder: dict = {}
 
     def f(soc: float) -> float:
         try:
-            v = runner.settled_voltage_v(soc, current_a, temperature_k, settle_s)
+            run = runner.run(soc, [(settle_s, current_a)], temperature_k)
         except SimulationError as exc:
             if "Minimum voltage" not in str(exc):
                 raise
-            v = math.nan  # at or past the cut-off already at this SOC
-        return (v if math.isfinite(v) else _PAST_CUTOFF) - voltage_v
+            return _PAST_CUTOFF  # at or past the cut-off already at this SOC
+        if run.reached_cutoff:
+            return _PAST_CUTOFF
+        holder[soc] = run
+        return float(run.pack_voltage_v[-1]) - voltage_v
 
     soc, res, clipped = _solve_monotone(f, runner.soc_bounds, tol_soc)
-    return Calibration(soc, res, clipped)
+    run = holder.get(soc)
+    if run is None or run.final_state is None or clipped:
+        return Calibration(soc, res, clipped)
+    # the settle's end stands for "now": continue from its state (charge of the settle not counted)
+    state = run.final_state
+    state = type(state)(state.solution, state.base_inputs, soc, 0.0)
+    return Calibration(soc, res, clipped, state)
 
 
 def history_segments(time_s, current_a, max_segments: int = 24) -> list[tuple[float, float]]:

@@ -200,6 +200,9 @@ class PackRunner:
                                          t_interp=t_interp)
                 except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError) as exc:
                     self._sim._solution = None
+                    if "Minimum voltage" in str(exc) and "initial conditions" in str(exc):
+                        cutoff = True  # already at the cut-off under this segment's current
+                        break
                     raise SimulationError(f"pack model failed: {str(exc).splitlines()[0]}") from None
                 seg = new
                 t_seg = np.asarray(seg.t, dtype=float)
@@ -218,6 +221,8 @@ class PackRunner:
                     break
             self._sim._solution = None
         final = None if sol is None else RunState(sol, base, soc_start, charge0 + charge_as / 3600.0)
+        if not times:  # cut-off before the first segment could start
+            return SegmentRun(np.zeros(1), np.full(1, np.nan), np.zeros(1), [], True, 0.0, None)
         return SegmentRun(time_s=np.concatenate(times), pack_voltage_v=np.concatenate(volts),
                           pack_current_a=np.concatenate(amps), segment_end_index=ends, reached_cutoff=cutoff,
                           end_time_s=t0, final_state=final)

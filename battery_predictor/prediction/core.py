@@ -58,7 +58,9 @@ class PredictorConfig:
     calibration_window_s : float
         History the SOC calibration simulates (0 = calibrate on the latest sample only, as the paper).
     recalibrate_after_s : float
-        Between full calibrations the calibrated state is propagated with the measured current.
+        Between full calibrations (at most this far apart, s) the calibrated state is propagated
+        with the measured current (charge counting through the model), which is more reliable
+        than a voltage calibration under load on a flat OCV (LiFePO4).
     """
 
     params_file: str
@@ -70,7 +72,7 @@ class PredictorConfig:
     default_temperature_k: float = math.nan
     route_currents_file: str = ""
     calibration_window_s: float = 600.0
-    recalibrate_after_s: float = 60.0
+    recalibrate_after_s: float = 3600.0
 
 
 @dataclass(frozen=True)
@@ -172,7 +174,7 @@ class PredictorCore:
             self._state = (stamp_s, voltage_v, current_a, temperature_k)
             self._cycle.add(stamp_s, current_a)
             self._history.append(self._state)
-            horizon = max(self.config.calibration_window_s, 60.0) + 120.0
+            horizon = max(self.config.calibration_window_s, self.config.recalibrate_after_s, 60.0) + 300.0
             while self._history and self._history[0][0] < stamp_s - horizon:
                 self._history.popleft()
 
@@ -215,7 +217,8 @@ class PredictorCore:
                 if len(newer) >= 2:
                     t = np.array([h[0] for h in newer])
                     i = np.array([h[2] for h in newer])
-                    run = self.runner.run(cached[2].state, history_segments(t, i, max_segments=8), temperature_k)
+                    segs = history_segments(t, i, max_segments=min(120, len(newer) - 1))
+                    run = self.runner.run(cached[2].state, segs, temperature_k)
                     if run.final_state is not None and not run.reached_cutoff:
                         v_sim = float(run.pack_voltage_v[-1])
                         cal = Calibration(self.runner.soc_of(run.final_state), v_sim - hist[-1][1], "",

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from battery_predictor.params import load_params
-from battery_predictor.prediction.calibration import calibrate_soc
+from battery_predictor.prediction.calibration import calibrate_on_history, calibrate_soc
 from battery_predictor.prediction.cell_runner import PackRunner
 from battery_predictor.prediction.core import (
     STATUS_MODEL_NOT_FITTED,
@@ -67,9 +67,11 @@ def test_runtime_prediction_matches_a_simulated_discharge(temi_runner):
                                                                    initial_soc=0.6))
     t_true = res.time_to_pack_voltage_s(13.30)
     t_now = 3600.0
-    v_now = float(np.interp(t_now + 0.002, res.time_s, res.pack_voltage_v))
-    pred = predict_remaining_runtime(temi_runner, v_now, 2.5, 298.15, 2.5, 13.30)
-    assert pred.remaining_s == pytest.approx(t_true - t_now, rel=0.03)
+    t_hist = np.arange(0.0, t_now + 1.0, 5.0)
+    v_hist = np.interp(t_hist + 0.002, res.time_s, res.pack_voltage_v)
+    cal = calibrate_on_history(temi_runner, t_hist, v_hist, np.full(t_hist.size, 2.5), 298.15)
+    pred = predict_remaining_runtime(temi_runner, float(v_hist[-1]), 2.5, 298.15, 2.5, 13.30, calibration=cal)
+    assert pred.remaining_s == pytest.approx(t_true - t_now, rel=0.02)
     assert pred.limited_by == "pack_cutoff"
 
 
@@ -135,8 +137,6 @@ def test_core_runtime_uses_the_discharge_cycle_average_and_resets_on_charge():
 
 
 def test_history_calibration_carries_polarisation_and_beats_single_sample(temi_runner):
-    from battery_predictor.prediction.calibration import calibrate_on_history
-
     segs = [(120.0, 9.0), (60.0, 1.0), (180.0, 12.0), (60.0, 2.0), (180.0, 10.0)]
     run = temi_runner.run(0.55, segs, 298.15)
     true_soc = temi_runner.soc_of(run.final_state)
