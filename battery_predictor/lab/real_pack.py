@@ -62,12 +62,13 @@ from battery_predictor.simulation.cell_setup import (
     prepared_parameter_values,
     quiet_pybamm,
 )
+from battery_predictor.simulation.liionpack_sim import (  # noqa: F401 (re-exported names)
+    CURRENT_INPUT,
+    RENAMED_INPUT_PREFIX,
+    liionpack_input_name,
+)
 from battery_predictor.simulation.load import StepLoad
 
-#: The input liionpack always passes first.
-CURRENT_INPUT = "Current function [A]"
-#: Prefix of the renamed inputs (see the module docstring).
-RENAMED_INPUT_PREFIX = "Per-cell "
 #: Per-cell temperature variable recorded from every cell.
 TEMPERATURE_VARIABLE = "Volume-averaged cell temperature [K]"
 
@@ -223,7 +224,7 @@ class PackTrace:
 
 def input_name(key: str) -> str:
     """Name under which a per-cell PyBaMM parameter is passed to liionpack (see module docstring)."""
-    return key if key > CURRENT_INPUT else RENAMED_INPUT_PREFIX + key
+    return liionpack_input_name(key)
 
 
 def real_pack_params(params: PackParams, spec: RealPackSpec) -> PackParams:
@@ -239,6 +240,9 @@ def real_pack_params(params: PackParams, spec: RealPackSpec) -> PackParams:
         manual["Total heat transfer coefficient [W.m-2.K-1]"] = float(spec.heat_transfer_w_m2_k)
         if spec.cooling_surface_area_m2 is not None:
             manual["Cell cooling surface area [m2]"] = float(spec.cooling_surface_area_m2)
+        elif "Cell cooling surface area [m2]" not in base.keys():
+            raise SimulationError(f"real pack {spec.pack_id}: {params.base_parameter_set} has no cooling surface; "
+                                  "set RealPackSpec.cooling_surface_area_m2")
     manual["Lower voltage cut-off [V]"] = float(spec.lower_cutoff_v)
     options = dict(params.options)
     options["thermal"] = spec.thermal
@@ -334,6 +338,7 @@ class RealPack:
         initial_soc: float | None = None,
         ambient_temperature_k: float | None = None,
         stop_pack_voltage_v: float | None = None,
+        stop_extra_steps: int = 2,
         period_s: float = 5.0,
     ) -> PackTrace:
         """Run the pack through ``load`` cell by cell with liionpack.
@@ -347,7 +352,10 @@ class RealPack:
         ambient_temperature_k : float, optional
             Ambient (and initial) temperature in K; None takes the params' default.
         stop_pack_voltage_v : float, optional
-            Stop at the first step whose pack terminal voltage is at or below this (V).
+            Stop once a step's pack terminal voltage is at or below this (V) ...
+        stop_extra_steps : int
+            ... after this many more steps (the step that reached it and ``stop_extra_steps - 1``
+            further ones are reported; at least 1).
         period_s : float
             liionpack step period in s (the load is resampled onto it, charge-conserving).
 
@@ -383,13 +391,17 @@ class RealPack:
                                    Ri=ic["r_i_ohm"], Rt=ic["r_t_ohm"], I=float(stepped.current_a[0]), V=3.5)
         i_map = netlist["desc"].str.find("I") > -1
         node_a, node_b = (int(n) for n in netlist.loc[i_map, ["node2", "node1"]].values.flatten())
-        stopped = {"flag": False}
+        state: dict[str, Any] = {"calls": 0, "trigger": None, "stopped": False}
 
         def node_termination(v_node) -> bool:
+            # liionpack calls this once per step with the node voltages under the step's current
+            state["calls"] += 1
             if stop_pack_voltage_v is None:
                 return False
-            if float(v_node[node_b] - v_node[node_a]) <= stop_pack_voltage_v:
-                stopped["flag"] = True
+            if state["trigger"] is None and float(v_node[node_b] - v_node[node_a]) <= stop_pack_voltage_v:
+                state["trigger"] = state["calls"]
+            if state["trigger"] is not None and state["calls"] - state["trigger"] >= max(1, int(stop_extra_steps)):
+                state["stopped"] = True
                 return True
             return False
 
@@ -415,7 +427,7 @@ class RealPack:
             raise SimulationError(f"real pack {self.spec.pack_id}: liionpack produced {t.size} steps")
         cell_v = np.asarray(out["Terminal voltage [V]"], dtype=float)
         cell_t = np.asarray(out[TEMPERATURE_VARIABLE], dtype=float)
-        if stopped["flag"]:
+        if state["stopped"]:
             termination = "pack_voltage"
         elif t.size < len(stepped.start_s):
             termination = "cell_cutoff"

@@ -22,6 +22,17 @@ from battery_predictor.simulation.cell_setup import (
     quiet_pybamm,
 )
 
+#: liionpack 0.4.0 passes per-cell inputs by position: the current first, then the others in the
+#: order given, while PyBaMM orders inputs alphabetically. Inputs are therefore passed sorted, and a
+#: parameter whose name sorts before the current's is passed under a renamed input.
+CURRENT_INPUT = "Current function [A]"
+RENAMED_INPUT_PREFIX = "Per-cell "
+
+
+def liionpack_input_name(key: str) -> str:
+    """Name under which a per-cell PyBaMM parameter is passed to liionpack (see above)."""
+    return key if key > CURRENT_INPUT else RENAMED_INPUT_PREFIX + key
+
 
 class LiionpackSimulator:
     """liionpack pack simulation (see module docstring).
@@ -63,14 +74,19 @@ class LiionpackSimulator:
         pv["Initial concentration in negative electrode [mol.m-3]"] = c_n0
         pv["Initial concentration in positive electrode [mol.m-3]"] = c_p0
         inputs = None
-        if request.cell_inputs:
+        from battery_predictor.diagnosis.extensions_impl import imbalance_cell_inputs
+
+        cell_inputs = request.cell_inputs or imbalance_cell_inputs(params)  # extension cell_imbalance
+        if cell_inputs:
             inputs = {}
-            for key, values in request.cell_inputs.items():
+            for key, values in cell_inputs.items():
                 arr = np.asarray(values, dtype=float)
                 if arr.shape != (params.n_cells,):
                     raise SimulationError(f"cell input '{key}' must have {params.n_cells} values, got {arr.shape}")
-                pv[key] = "[input]"
-                inputs[key] = arr
+                name = liionpack_input_name(key)
+                pv[key] = pybamm.InputParameter(name)
+                inputs[name] = arr
+            inputs = dict(sorted(inputs.items()))
         p = params.interconnect
         netlist = lp.setup_circuit(Np=params.parallel, Ns=params.series, Rb=p["r_b_ohm"], Rc=p["r_c_ohm"],
                                    Ri=p["r_i_ohm"], Rt=p["r_t_ohm"], I=float(stepped.current_a[0]),
