@@ -1,80 +1,159 @@
-"""``battery-predictor demo``: the main job on bundled data.
+"""``battery-predictor demo``: the main job on bundled data, through the real ROS 2 nodes.
 
-Fits the information robot's pack (paper params as the start) to a bundled
-dynamic discharge with TPE, validates the fit on the bundled static discharge,
-and prints both (the seed paper's Table 2 kind).
+1. Information robot (temi): a bundled discharge bag (relay topics, with the
+   true time until 13.30 V in its metadata) is replayed into ``battery_monitor``
+   and ``predictor`` (``battery-predictor replay`` in-process, ``/clock`` from
+   the bag, lock step); the remaining runtime published on ``/remaining_runtime``
+   after 30, 60, ..., 300 min is printed against the truth.
+2. Luggage robot (Ranger Mini): a bundled bag (BatteryState) is replayed up to a
+   given time, and ``/can_accept_route`` is asked over the middleware for the
+   paper's longest route with 20, 40, 60 and 80 kg; the decisions are printed.
+
+The nodes run on a ROS domain of their own with discovery kept on this machine,
+so the demo never talks to another ROS system. Takes about a minute.
 """
 
 from __future__ import annotations
 
+import os
+import random
 import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 BAGS = REPO / "bags"
-DEMO_FIT_BAG = "temi_dynamic_pack1"
-DEMO_VALIDATION_BAG = "temi_static_0p5c_pack1"
+NODE_PARAMS = REPO / "params" / "ros"
+DEMO_TEMI_BAG = "temi_dynamic_pack1"
+DEMO_RANGER_BAG = "ranger_stepwise_pack1"
+DEMO_RANGER_AT_MIN = 341.0
+PAYLOADS_KG = (20.0, 40.0, 60.0, 80.0)
 
 
 def register(sub) -> None:
-    p = sub.add_parser("demo", help="fit the information robot's pack to bundled data and print the fit")
-    p.add_argument("--trials", type=int, default=200, help="TPE trials (default 200; the paper uses 1000)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default=None, help="directory for the fitted params and plot (default: temp dir)")
+    p = sub.add_parser("demo", help="replay a bundled temi bag through the nodes (runtime vs truth) and ask "
+                                    "/can_accept_route for the longest route at 20-80 kg from a bundled Ranger state",
+                       description=__doc__.split("\n\n")[0])
+    p.add_argument("--temi-bag", default=DEMO_TEMI_BAG, help=f"bundled temi bag (default {DEMO_TEMI_BAG})")
+    p.add_argument("--ranger-bag", default=DEMO_RANGER_BAG, help=f"bundled Ranger bag (default {DEMO_RANGER_BAG})")
+    p.add_argument("--ranger-at-min", type=float, default=DEMO_RANGER_AT_MIN,
+                   help=f"replay the Ranger bag up to this time, min (default {DEMO_RANGER_AT_MIN:g})")
+    p.add_argument("--rate", type=float, default=0.0, help="replay rate (default 0: as fast as the nodes take it)")
+    p.add_argument("--runtime-period", type=float, default=300.0,
+                   help="predictor.runtime_period_s in the replay, bag seconds (default 300)")
+    p.add_argument("--out", default=None, help="directory for the output bag and plot (default: a temp dir)")
     p.set_defaults(func=run)
 
 
-def run(args) -> int:
+def _bag(name: str) -> Path:
     from battery_predictor.errors import InputDataError
-    from battery_predictor.fitting.cost import r2_mod
-    from battery_predictor.fitting.optimiser import TPEOptimiser
-    from battery_predictor.fitting.problem import FitProblem, request_for_recording, trim_to_discharge
-    from battery_predictor.fitting.space import fit_space
-    from battery_predictor.io.loader import load_recording
-    from battery_predictor.params import load_params
-    from battery_predictor.plots import plot_voltage_fit
-    from battery_predictor.simulation import get_simulator
 
-    fit_path, val_path = BAGS / DEMO_FIT_BAG, BAGS / DEMO_VALIDATION_BAG
-    for path in (fit_path, val_path):
-        if not path.exists():
-            raise InputDataError(f"{path}: bundled bag missing (regenerate with 'make bags')")
-    params = load_params(REPO / "params" / "temi.yaml")
-    fit_rec = trim_to_discharge(load_recording(fit_path))
-    val_rec = trim_to_discharge(load_recording(val_path))
-    sim = get_simulator("fast")
-    print(f"demo: information robot ({params.series}S{params.parallel}P, {params.base_parameter_set} SPM)")
-    print(f"  fit data:        {fit_path.name} ({fit_rec.duration_s / 60:.0f} min, "
-          f"{fit_rec.charge_drawn_ah():.2f} Ah)  [emulated recording, see bags/README.md]")
-    print(f"  validation data: {val_path.name} ({val_rec.duration_s / 60:.0f} min)")
+    path = Path(name) if Path(name).exists() else BAGS / name
+    if not path.exists():
+        raise InputDataError(f"{path}: bundled bag missing (regenerate with 'make bags')")
+    return path
 
-    def score(p, rec) -> float:
-        res = sim.simulate(p, request_for_recording(p, rec, initial_state="params",
-                                                    extend_s=0.2 * rec.duration_s))
-        return r2_mod(rec.relative_time_s, rec.voltage_v, res.time_s, res.pack_voltage_v), res
 
-    before_fit, _ = score(params, fit_rec)
-    before_val, _ = score(params, val_rec)
-    out_dir = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="battery-predictor-demo-"))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    problem = FitProblem(params, [fit_rec], sim, initial_state="params")
-    space = fit_space(params)
-    print(f"  fitting {len(space)} parameters with TPE, {args.trials} trials (seed {args.seed}) ...")
-    result = TPEOptimiser(n_trials=args.trials, seed=args.seed, storage=f"sqlite:///{out_dir / 'demo.optuna.db'}",
-                          progress=True).run(problem, space)
-    fitted = params.with_values(result.best_values)
-    after_fit, res_fit = score(fitted, fit_rec)
-    after_val, res_val = score(fitted, val_rec)
-    fitted.to_yaml(out_dir / "temi_fit.yaml")
-    plot_voltage_fit([fit_rec, val_rec], [res_fit, res_val], out_dir / "temi_fit.png",
-                     title=f"temi: fit R2_mod {after_fit:.3f}, validation R2_mod {after_val:.3f}",
-                     labels=[f"fit: {fit_path.name}", f"validation: {val_path.name}"])
-    print(f"\n{'':28}{'paper params':>14}{'fitted':>10}")
-    print(f"{'R2_mod on fit data':28}{before_fit:>14.4f}{after_fit:>10.4f}")
-    print(f"{'R2_mod on validation data':28}{before_val:>14.4f}{after_val:>10.4f}")
-    print(f"(seed paper, Table 2, Chen2020 dynamic -> static: 0.97 / 0.95)\n\nfitted parameters "
-          f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s):")
-    for p in space:
-        print(f"  {p.name:<58}{p.initial:>12.5g} -> {result.best_values[p.name]:>12.5g}")
-    print(f"\nwrote {out_dir / 'temi_fit.yaml'} and {out_dir / 'temi_fit.png'}")
+def _isolated_context():
+    """An rclpy context on a random ROS domain (150-229), discovery on this machine only."""
+    import rclpy
+    from rclpy.context import Context
+
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.pop("ROS_STATIC_PEERS", None)
+    context = Context()
+    rclpy.init(args=["battery-predictor"], context=context, domain_id=random.randrange(150, 230))
+    return context
+
+
+def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -> None:
+    from battery_predictor.nodes.replay_session import ReplaySession
+    from battery_predictor.replay import (
+        OutputBag,
+        compare_at_checkpoints,
+        error_summary,
+        plot_runtime,
+        read_replay_stream,
+        runtime_truth,
+    )
+
+    stream = read_replay_stream(bag)
+    truth = runtime_truth(stream.metadata)
+    params = NODE_PARAMS / "temi_nodes.yaml"
+    print(f"1) information robot (temi): {bag.name} replayed into battery_monitor + predictor "
+          f"({params.relative_to(REPO)})")
+    print(f"   {stream.style} topics, {len(stream.messages)} messages over {stream.duration_s / 60:.0f} min; "
+          + (f"truth: {truth.stop_voltage_v:.2f} V reached after {truth.runtime_s / 60:.1f} min" if truth else
+             "no runtime truth in this bag"), flush=True)
+    output = OutputBag(out / "temi_outputs", metadata={"replay_of": str(bag), "params": str(params)})
+    try:
+        with ReplaySession(stream, context=context, params_file=str(params), rate=rate, out_bag=output,
+                           predictor_overrides={"runtime_period_s": runtime_period_s}) as session:
+            stats = session.play_until()
+            session.flush()
+            points = session.runtime_points()
+            rejected = session.monitor.monitor.rejected_total
+    finally:
+        output.close()
+    checkpoints = compare_at_checkpoints(points, truth) if truth else []
+    png = plot_runtime(points, truth, out / "temi_remaining_runtime.png", checkpoints=checkpoints,
+                       title=f"{bag.name}: /remaining_runtime vs truth")
+    print(f"   played in {stats.wall_s:.0f} s; {sum(p.valid for p in points)} valid predictions, "
+          f"{rejected} samples rejected by the monitor")
+    if checkpoints:
+        print(f"   {'after':>8} {'predicted':>10} {'true':>8} {'error':>8}")
+        for c in checkpoints:
+            print(f"   {c.checkpoint_min:>4.0f} min {c.predicted_min:>6.1f} min {c.true_min:>4.0f} min "
+                  f"{c.error_min:>+5.1f} min")
+        e = error_summary(checkpoints)
+        print(f"   MAE {e['mae_min']:.1f} min, max |error| {e['max_abs_error_min']:.1f} min, MAPE {e['mape_pct']:.1f} % "
+              "(seed paper, real Temi: MAE 14.92 min, MAPE 18.9 %)")
+    print(f"   plot {png}; node outputs {out / 'temi_outputs'} (MCAP)\n")
+
+
+def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
+    from battery_predictor_msgs.srv import CanAcceptRoute
+
+    from battery_predictor.nodes.messages import route_section_msgs
+    from battery_predictor.nodes.replay_session import ReplaySession
+    from battery_predictor.profiles.ranger import longest_route
+    from battery_predictor.replay import read_replay_stream
+
+    stream = read_replay_stream(bag)
+    params = NODE_PARAMS / "ranger_nodes.yaml"
+    with ReplaySession(stream, context=context, params_file=str(params), rate=rate,
+                       predictor_overrides={"runtime_period_s": 600.0}) as session:
+        session.play_until(stream.ros_time_ns(at_min * 60.0))
+        state = session.predictor.route_core.latest_state()
+        print(f"2) luggage robot (Ranger Mini): {bag.name} replayed to {at_min:g} min "
+              f"({params.relative_to(REPO)})")
+        if state is not None:
+            print(f"   pack state: {state[1]:.2f} V at {state[2]:.2f} A, {state[3] - 273.15:.1f} degC")
+        route = longest_route(80.0)
+        print(f"   /can_accept_route, the paper's longest route ({route.length_m:.0f} m, "
+              f"{route.duration_s / 60:.1f} min, payload on the loaded leg):")
+        print(f"   {'payload':>8} {'decision':>9} {'V after':>9} {'threshold':>10} {'margin':>8} {'charge':>8}")
+        reasons = []
+        for kg in PAYLOADS_KG:
+            request = CanAcceptRoute.Request(sections=route_section_msgs(longest_route(kg).sections))
+            r = session.call_route(request)
+            print(f"   {kg:>5.0f} kg {'accept' if r.accepted else 'reject':>9} {r.predicted_voltage_v:>7.2f} V "
+                  f"{r.threshold_voltage_v:>8.2f} V {r.margin_v:>+6.2f} V {r.route_charge_ah:>5.2f} Ah")
+            reasons.append(f"{kg:.0f} kg: {r.reason}")
+    print("   reasons:\n     " + "\n     ".join(reasons))
+
+
+def run(args) -> int:
+    temi_bag, ranger_bag = _bag(args.temi_bag), _bag(args.ranger_bag)
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="battery-predictor-demo-"))
+    out.mkdir(parents=True, exist_ok=True)
+    if (out / "temi_outputs").exists():
+        from battery_predictor.errors import InputDataError
+
+        raise InputDataError(f"{out / 'temi_outputs'}: exists (choose another --out)")
+    context = _isolated_context()
+    try:
+        _temi(context, temi_bag, out, args.rate, args.runtime_period)
+        _ranger(context, ranger_bag, args.ranger_at_min, args.rate)
+    finally:
+        context.try_shutdown()
     return 0

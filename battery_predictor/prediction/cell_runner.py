@@ -115,6 +115,10 @@ class PackRunner:
         p = params.interconnect
         self.r_eq_ohm = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
                                                           p["r_t_ohm"])
+        from battery_predictor.diagnosis.extensions_impl import current_offset_a
+
+        #: extension current_offset: currents given to run() are sensor readings; the cells carry reading - offset
+        self.current_offset_a = current_offset_a(params)
 
     # ------------------------------------------------------------------ state
     @cached_property
@@ -170,6 +174,8 @@ class PackRunner:
         """
         import pybamm
 
+        from battery_predictor.diagnosis.extensions_impl import series_resistance_factor
+
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
             raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
         if isinstance(start, RunState):
@@ -192,7 +198,7 @@ class PackRunner:
                 if not (duration_s > 0 and np.isfinite(duration_s) and np.isfinite(current_a)):
                     raise SimulationError(f"invalid segment ({duration_s} s, {current_a} A)")
                 inputs = dict(base)
-                inputs[_CURRENT] = current_a / self.params.parallel
+                inputs[_CURRENT] = (current_a - self.current_offset_a) / self.params.parallel
                 n = max(self.samples_per_segment, int(np.ceil(duration_s / self.max_spacing_s)))
                 t_interp = np.linspace(0.0, duration_s, n + 1)
                 try:
@@ -209,7 +215,8 @@ class PackRunner:
                 t_seg = t_seg - t_seg[0]
                 v_cell = np.asarray(seg["Terminal voltage [V]"].entries, dtype=float)
                 times.append(t0 + t_seg)
-                volts.append(self.params.series * v_cell - current_a * self.r_eq_ohm)
+                volts.append(self.params.series * v_cell - (current_a - self.current_offset_a) * self.r_eq_ohm
+                             * float(series_resistance_factor(self.params, temperature_k)))
                 amps.append(np.full(t_seg.size, current_a))
                 ends.append(sum(len(x) for x in times) - 1)
                 t0 += float(t_seg[-1])

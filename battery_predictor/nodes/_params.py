@@ -1,0 +1,84 @@
+"""Declaring ROS parameters with descriptors (description and range), and resolving file parameters."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+
+def declare_float(node: Node, name: str, default: float, description: str, low: float, high: float) -> float:
+    """Declare a double parameter with a FloatingPointRange ``[low, high]``; returns its value.
+
+    An integer given for it (``window_s: 5`` in a params file, ``-p window_s:=5``) is taken as a double
+    instead of failing with rclpy's "expecting type DOUBLE".
+    """
+    overrides = node._parameter_overrides  # rclpy has no public accessor
+    given = overrides.get(name)
+    if given is not None and given.type_ == Parameter.Type.INTEGER:
+        overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(given.value))
+    descriptor = ParameterDescriptor(description=description, floating_point_range=[
+        FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)])
+    return float(node.declare_parameter(name, float(default), descriptor).value)
+
+
+def declare_int(node: Node, name: str, default: int, description: str, low: int, high: int) -> int:
+    """Declare an integer parameter with an IntegerRange ``[low, high]``; returns its value."""
+    descriptor = ParameterDescriptor(description=description, integer_range=[
+        IntegerRange(from_value=int(low), to_value=int(high), step=1)])
+    return int(node.declare_parameter(name, int(default), descriptor).value)
+
+
+def declare_str(node: Node, name: str, default: str, description: str, choices: tuple[str, ...] = ()) -> str:
+    """Declare a string parameter (``choices`` are listed in the description and enforced)."""
+    text = description + (f" One of: {', '.join(choices)}." if choices else "")
+    descriptor = ParameterDescriptor(description=text, additional_constraints=(
+        f"one of {', '.join(choices)}" if choices else ""))
+    value = str(node.declare_parameter(name, default, descriptor).value)
+    if choices and value not in choices:
+        raise ValueError(f"parameter {name} is {value!r} (must be one of {', '.join(choices)})")
+    return value
+
+
+def declare_bool(node: Node, name: str, default: bool, description: str) -> bool:
+    """Declare a boolean parameter."""
+    return bool(node.declare_parameter(name, bool(default), ParameterDescriptor(description=description)).value)
+
+
+def undeclared_overrides(node: Node) -> list[str]:
+    """Parameter names given to the node (params file, ``-p``) that it never declared: typos, usually."""
+    declared = set(node._parameters)  # rclpy has no public accessor
+    return sorted(name for name in node._parameter_overrides if name not in declared)
+
+
+def packaged_params_dirs() -> list[Path]:
+    """Where bundled pack params files live: the installed share directory, then the source tree."""
+    out = [Path(sys.prefix) / "share" / "battery_predictor" / "params"]
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        if prefix:
+            out.append(Path(prefix) / "share" / "battery_predictor" / "params")
+    out.append(Path(__file__).resolve().parents[2] / "params")
+    return out
+
+
+def resolve_params_file(value: str) -> str:
+    """A pack params file path: absolute, relative to the working directory, or a bundled file name.
+
+    ``temi.yaml`` resolves to the bundled ``params/temi.yaml`` when no such file
+    is in the working directory. An unresolvable path is returned unchanged (the
+    predictor then reports the model as not loaded, with the path in the reason).
+    """
+    if not value:
+        return value
+    path = Path(value).expanduser()
+    if path.is_absolute() or path.exists():
+        return str(path)
+    for directory in packaged_params_dirs():
+        candidate = directory / path
+        if candidate.exists():
+            return str(candidate)
+    return value

@@ -1,0 +1,322 @@
+"""``predictor``: remaining runtime on ``/remaining_runtime`` and the ``/can_accept_route`` service.
+
+A thin adapter around :class:`battery_predictor.prediction.core.PredictorCore`
+(the fitted pack model from ``params_file``, the output of ``fit``):
+
+* ``PackState`` (from ``battery_monitor``) -> :meth:`PredictorCore.update_state`;
+  a state flagged ``stale`` by the monitor is not fed to the model and makes
+  every answer invalid/rejected until a fresh state arrives.
+* every ``runtime_period_s`` (node clock) -> :meth:`PredictorCore.remaining_runtime`
+  -> ``battery_predictor_msgs/RemainingRuntime`` (stamp = the pack state it is based on).
+* ``can_accept_route`` (``battery_predictor_msgs/CanAcceptRoute``) ->
+  :meth:`PredictorCore.can_accept_route`. Invalid requests, unknown or stale
+  state and model failures give ``accepted = false`` with a reason; the
+  callback never raises.
+
+Threading: three mutually exclusive callback groups -- pack states, the runtime
+timer (the ~0.1 s model run), the service -- so with a
+:class:`~rclpy.executors.MultiThreadedExecutor` the service is answered while a
+runtime update runs. The core is thread-safe and caches its SOC calibration, so
+by default the service shares the runtime's model and reuses its calibration;
+``separate_route_model`` gives the service a model of its own instead (one model
+solves one simulation at a time). ``/diagnostics`` carries the model status, the runtime
+update time and the service latency.
+
+Time is the node's ROS clock: staleness is ``now - stamp of the last pack state``
+on the same time base as the monitor's stamps (``use_sim_time`` in a replay).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+
+from battery_predictor_msgs.msg import PackState, RemainingRuntime
+from battery_predictor_msgs.srv import CanAcceptRoute
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.nodes._params import (
+    declare_bool,
+    declare_float,
+    declare_str,
+    resolve_params_file,
+    undeclared_overrides,
+)
+from battery_predictor.nodes._sync import TimerProbe
+from battery_predictor.nodes.messages import fill_route_response, remaining_runtime_msg, route_sections, stamp_to_s
+from battery_predictor.prediction.core import (
+    STATUS_MODEL_FAILED,
+    STATUS_STALE_INPUT,
+    PredictorConfig,
+    PredictorCore,
+    RuntimeStatus,
+)
+from battery_predictor.prediction.route import RouteDecision, rejected
+
+#: A pack state this much older than the latest one restarts the predictor (time base restarted), s.
+TIME_BACK_RESET_S = 60.0
+#: QoS of the PackState input (reliable, deep enough for a fast replay).
+PACK_STATE_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
+#: QoS of /remaining_runtime and /diagnostics.
+OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def _core_default(name: str) -> float:
+    """The default of a PredictorConfig field (the core's tuning is the parameter's default)."""
+    return float(PredictorConfig.__dataclass_fields__[name].default)
+
+
+def _unset(value: float) -> float:
+    """0 means "take it from the params file" (ROS parameters cannot default to NaN within a range)."""
+    return math.nan if value == 0.0 else value
+
+
+class PredictorNode(Node):
+    """The predictor node.
+
+    Parameters
+    ----------
+    node_name : str
+        Node name (the params file's top-level key).
+    core : PredictorCore, optional
+        An already built core (tests, benchmarks); default: built from the parameters.
+    **kwargs
+        Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ``cli_args``...).
+    """
+
+    def __init__(self, node_name: str = "predictor", *, core: PredictorCore | None = None, **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        self.config, topics, runtime_period_s = self._declare_parameters()
+        for name in undeclared_overrides(self):
+            self.get_logger().warning(f"parameter '{name}' is set but not used by this node (typo?)")
+        t0 = time.perf_counter()
+        self.core = core if core is not None else PredictorCore(self.config)
+        # Optionally the service gets a pack model of its own so a route answer never waits for a runtime
+        # update (each model solves one simulation at a time). A given core serves both, and so does the
+        # runtime's when routes need no model (no route threshold, or no model at all).
+        separate = (self._separate_route_model and core is None and self.core.runner is not None
+                    and math.isfinite(self.core.route_min_voltage_v))
+        self.route_core = PredictorCore(self.config, params=self.core.params) if separate else self.core
+        if self.core.runner is None:
+            self.get_logger().error(f"no usable pack model: {self.core.model_error}")
+        else:
+            self.get_logger().info(f"pack model {self.core.params.name} from {self.core.params.source} loaded in "
+                                   f"{time.perf_counter() - t0:.1f} s; cut-off {self.core.cutoff_voltage_v:.2f} V, "
+                                   f"route threshold {self.core.route_min_voltage_v:.2f} V")
+        self._lock = threading.Lock()
+        self._monitor_stale = False
+        self._monitor_stale_since_s = math.nan
+        self.states_received = 0
+        self.runtimes_published = 0
+        self.routes_answered = 0
+        #: Wall-clock durations (s) of the last runtime updates and route answers.
+        self.runtime_update_s: deque[float] = deque(maxlen=1000)
+        self.route_latency_s: deque[float] = deque(maxlen=1000)
+        self.last_runtime: RuntimeStatus | None = None
+
+        self.state_group = MutuallyExclusiveCallbackGroup()
+        self.runtime_group = MutuallyExclusiveCallbackGroup()
+        self.service_group = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(PackState, topics["pack_state"], self._on_pack_state, PACK_STATE_QOS,
+                                 callback_group=self.state_group)
+        self.runtime_pub = self.create_publisher(RemainingRuntime, topics["remaining_runtime"], OUTPUT_QOS)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics["diagnostics"], OUTPUT_QOS)
+        self.route_service = self.create_service(CanAcceptRoute, topics["can_accept_route"], self._on_can_accept_route,
+                                                 callback_group=self.service_group)
+        self.runtime_probe = TimerProbe(self.get_clock())
+        self.runtime_timer = self.create_timer(runtime_period_s, self.runtime_probe.wrap(self._on_runtime_timer),
+                                               callback_group=self.runtime_group)
+        self.runtime_probe.timer = self.runtime_timer
+
+    # ------------------------------------------------------------ parameters
+    def _declare_parameters(self) -> tuple[PredictorConfig, dict[str, str], float]:
+        params_file = declare_str(self, "params_file", "",
+                                  "Fitted pack params YAML (output of 'battery-predictor fit'): absolute, relative to "
+                                  "the working directory, or the name of a bundled file such as temi.yaml.")
+        topics = {
+            "pack_state": declare_str(self, "pack_state_topic", "pack_state",
+                                      "Input: clean pack state from battery_monitor."),
+            "remaining_runtime": declare_str(self, "remaining_runtime_topic", "remaining_runtime",
+                                             "Output: battery_predictor_msgs/RemainingRuntime."),
+            "can_accept_route": declare_str(self, "can_accept_route_service", "can_accept_route",
+                                            "Service: battery_predictor_msgs/CanAcceptRoute."),
+            "diagnostics": declare_str(self, "diagnostics_topic", "/diagnostics",
+                                       "Output topic of diagnostic_msgs/DiagnosticArray."),
+        }
+        self.frame_id = declare_str(self, "frame_id", "battery", "frame_id of the published headers.")
+        self._separate_route_model = declare_bool(
+            self, "separate_route_model", False,
+            "Give the can_accept_route service a pack model of its own, so a route answer never waits for a "
+            "runtime update; it then calibrates the state itself instead of reusing the runtime update's "
+            "calibration (false: shared model, less work per answer; see benchmarks/ros_latency.py).")
+        runtime_period_s = declare_float(self, "runtime_period_s", 10.0,
+                                         "Period of the remaining-runtime update and of /remaining_runtime, s "
+                                         "(node clock).", 0.01, 86400.0)
+        config = PredictorConfig(
+            params_file=resolve_params_file(params_file),
+            cutoff_voltage_v=_unset(declare_float(
+                self, "cutoff_voltage_v", 0.0,
+                "Pack voltage at which the robot stops (remaining runtime ends), V; 0 = the params file's "
+                "thresholds.runtime_cutoff_voltage_v (else pack.min_voltage_v).", 0.0, 1000.0)),
+            route_min_voltage_v=_unset(declare_float(
+                self, "route_min_voltage_v", 0.0,
+                "No route may end below this pack voltage at the standstill current, V; 0 = the params file's "
+                "thresholds.route_min_voltage_v.", 0.0, 1000.0)),
+            standstill_current_a=_unset(declare_float(
+                self, "standstill_current_a", 0.0,
+                "Current the route threshold applies at, A; 0 = the params file's thresholds.standstill_current_a "
+                "(else 1.70 A).", 0.0, 1000.0)),
+            stale_after_s=declare_float(self, "stale_after_s", 30.0,
+                                        "A pack state older than this (node clock) is stale, s.", 0.01, 86400.0),
+            charge_current_a=declare_float(self, "charge_current_a", 0.2,
+                                           "A current below -charge_current_a (charging) ends the present discharge "
+                                           "cycle (its average current restarts), A.", 0.0, 1000.0),
+            default_temperature_k=_unset(declare_float(
+                self, "default_temperature_k", 0.0,
+                "Temperature assumed when none is measured, K; 0 = the params file's operating.ambient_temperature_k.",
+                0.0, 500.0)),
+            calibration_window_s=declare_float(
+                self, "calibration_window_s", _core_default("calibration_window_s"),
+                "History the SOC calibration simulates, s (0 = the latest pack state only, as the paper).",
+                0.0, 86400.0),
+            recalibrate_after_s=declare_float(
+                self, "recalibrate_after_s", _core_default("recalibrate_after_s"),
+                "Full SOC calibrations at most this far apart, s; in between the calibrated state is carried "
+                "forward with the measured current.", 0.0, 86400.0),
+            route_currents_file=resolve_params_file(declare_str(
+                self, "route_currents_file", "",
+                "Per-(payload, slope) current samples of the luggage robot; empty = the bundled "
+                "ranger_currents.yaml.")),
+        )
+        return config, topics, runtime_period_s
+
+    # --------------------------------------------------------------- helpers
+    def _now_s(self) -> float:
+        return self.get_clock().now().nanoseconds / 1e9
+
+    def _stale_reason(self) -> str | None:
+        with self._lock:
+            if not self._monitor_stale:
+                return None
+            since = self._monitor_stale_since_s
+        return f"battery monitor reports stale input (since {since:.1f} s on the node clock)"
+
+    # ------------------------------------------------------------- callbacks
+    def _restart_if_time_went_back(self, stamp: float) -> None:
+        """A pack state much older than the latest one means the time base restarted (a bag played again):
+        start over with fresh cores, else every new state would be ignored as out of order."""
+        latest = self.core.latest_state()
+        if latest is None or stamp >= latest[0] - TIME_BACK_RESET_S:
+            return
+        self.get_logger().warning(f"pack state time went back by {latest[0] - stamp:.1f} s (bag restarted?): "
+                                  "starting over")
+        shared = self.route_core is self.core
+        self.core = PredictorCore(self.config, params=self.core.params)
+        self.route_core = self.core if shared else PredictorCore(self.config, params=self.core.params)
+
+    def _on_pack_state(self, msg: PackState) -> None:
+        stamp = stamp_to_s(msg.header.stamp)
+        self._restart_if_time_went_back(stamp)
+        if msg.stale:
+            with self._lock:
+                if not self._monitor_stale:
+                    self._monitor_stale_since_s = stamp
+                self._monitor_stale = True
+        else:
+            with self._lock:
+                self._monitor_stale = False
+            for core in {id(self.core): self.core, id(self.route_core): self.route_core}.values():
+                core.update_state(stamp, float(msg.voltage_v), float(msg.current_a), float(msg.temperature_k))
+        with self._lock:
+            self.states_received += 1
+
+    def runtime_status(self, now_s: float) -> RuntimeStatus:
+        """The remaining runtime at ``now_s`` (never raises)."""
+        stale = self._stale_reason()
+        if stale is not None:
+            return RuntimeStatus(now_s, math.nan, math.nan, math.nan, math.nan, self.core.cutoff_voltage_v, False,
+                                 STATUS_STALE_INPUT, stale)
+        try:
+            return self.core.remaining_runtime(now_s)
+        except Exception as exc:  # noqa: BLE001 - the core should not raise; never let the node die of it
+            return RuntimeStatus(now_s, math.nan, math.nan, math.nan, math.nan, self.core.cutoff_voltage_v, False,
+                                 STATUS_MODEL_FAILED, f"internal error: {type(exc).__name__}: {exc}")
+
+    def _on_runtime_timer(self) -> None:
+        t0 = time.perf_counter()
+        status = self.runtime_status(self._now_s())
+        elapsed = time.perf_counter() - t0
+        self.runtime_pub.publish(remaining_runtime_msg(status, self.frame_id))
+        with self._lock:
+            self.runtime_update_s.append(elapsed)
+            self.last_runtime = status
+            self.runtimes_published += 1
+        self.diagnostics_pub.publish(self.diagnostics())
+
+    def decide_route(self, request: CanAcceptRoute.Request) -> RouteDecision:
+        """The decision for a request at the present node time (never raises)."""
+        threshold = self.route_core.route_min_voltage_v
+        try:
+            sections = route_sections(request.sections)
+        except BatteryPredictorError as exc:
+            return rejected(f"invalid request: {exc}", threshold)
+        except Exception as exc:  # noqa: BLE001 - malformed input must never take the service down
+            return rejected(f"invalid request: {type(exc).__name__}: {exc}", threshold)
+        stale = self._stale_reason()
+        if stale is not None:
+            return rejected(f"state unknown: {stale}", threshold)
+        try:
+            return self.route_core.can_accept_route(sections, self._now_s(),
+                                              starts_away_from_charger=bool(request.starts_away_from_charger),
+                                              ends_away_from_charger=bool(request.ends_away_from_charger))
+        except Exception as exc:  # noqa: BLE001
+            return rejected(f"model failed: internal error: {type(exc).__name__}: {exc}", threshold)
+
+    def _on_can_accept_route(self, request: CanAcceptRoute.Request,
+                             response: CanAcceptRoute.Response) -> CanAcceptRoute.Response:
+        t0 = time.perf_counter()
+        fill_route_response(response, self.decide_route(request))
+        with self._lock:
+            self.route_latency_s.append(time.perf_counter() - t0)
+            self.routes_answered += 1
+        return response
+
+    def diagnostics(self) -> DiagnosticArray:
+        """Model status, last runtime answer, runtime update time and service latency."""
+        with self._lock:
+            last = self.last_runtime
+            updates = list(self.runtime_update_s)
+            latencies = list(self.route_latency_s)
+            values = [("states_received", str(self.states_received)),
+                      ("runtimes_published", str(self.runtimes_published)),
+                      ("routes_answered", str(self.routes_answered))]
+        if self.core.runner is None:
+            level, message = DiagnosticStatus.ERROR, f"no usable pack model: {self.core.model_error}"
+        elif last is not None and not last.valid:
+            level, message = DiagnosticStatus.WARN, f"remaining runtime invalid: {last.reason}"
+        else:
+            level, message = DiagnosticStatus.OK, last.reason if last is not None else "waiting for pack state"
+        if updates:
+            values += [("runtime_update_last_s", f"{updates[-1]:.4f}"), ("runtime_update_max_s", f"{max(updates):.4f}")]
+        if latencies:
+            values += [("route_latency_last_s", f"{latencies[-1]:.4f}"),
+                       ("route_latency_max_s", f"{max(latencies):.4f}")]
+        if self.core.params is not None:
+            values.append(("params_file", str(self.core.params.source)))
+        array = DiagnosticArray()
+        array.header.stamp = self.get_clock().now().to_msg()
+        array.status = [DiagnosticStatus(level=level, name=f"{self.get_name()}: pack model", message=message,
+                                         hardware_id="battery_pack",
+                                         values=[KeyValue(key=k, value=v) for k, v in values])]
+        return array
+
+    # ------------------------------------------------------------- lock step
+    def idle(self, now_ns: int) -> bool:
+        """True when the runtime timer has nothing due or in flight at ``now_ns`` (see :mod:`._sync`)."""
+        return self.runtime_probe.idle(now_ns)
