@@ -57,6 +57,9 @@ class PredictorConfig:
         Ranger per-(payload, slope) current samples (empty = shipped default).
     calibration_window_s : float
         History the SOC calibration simulates (0 = calibrate on the latest sample only, as the paper).
+    peak_current_quantile : float
+        Quantile of the present cycle's (5 s window) currents taken as its recurring load peak:
+        the cut-off is met under a peak, not under the average (0 = average only, as the paper).
     recalibrate_after_s : float
         Between full calibrations (at most this far apart, s) the calibrated state is propagated
         with the measured current (charge counting through the model), which is more reliable
@@ -73,6 +76,7 @@ class PredictorConfig:
     route_currents_file: str = ""
     calibration_window_s: float = 600.0
     recalibrate_after_s: float = 3600.0
+    peak_current_quantile: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,7 @@ class _CycleAverage:
         self.duration_s = 0.0
         self.last_stamp_s: float | None = None
         self.last_current_a = 0.0
+        self.currents: deque[float] = deque(maxlen=20000)
 
     def add(self, stamp_s: float, current_a: float) -> None:
         if current_a < -self.charge_current_a:
@@ -113,6 +118,12 @@ class _CycleAverage:
             self.duration_s += dt
         self.last_stamp_s = stamp_s
         self.last_current_a = current_a
+        self.currents.append(current_a)
+
+    def quantile_a(self, q: float) -> float:
+        if not self.currents or q <= 0:
+            return math.nan
+        return float(np.quantile(np.fromiter(self.currents, float), min(q, 1.0)))
 
     def mean_a(self) -> float:
         if self.duration_s <= 0:
@@ -249,13 +260,15 @@ class PredictorCore:
         temp = self._temperature(t_k)
         with self._lock:
             avg = self._cycle.mean_a()
+            peak = self._cycle.quantile_a(self.config.peak_current_quantile)
         avg = avg if avg > 0.05 else max(i, 0.05)
         if v <= cutoff:
             return RuntimeStatus(stamp, 0.0, avg, temp, math.nan, cutoff, True, STATUS_BELOW_CUTOFF,
                                  f"pack voltage {v:.2f} V is at or below the cut-off {cutoff:.2f} V")
         try:
             pred = predict_remaining_runtime(self.runner, v, i, temp, avg, cutoff,
-                                             calibration=self.calibration(temp))
+                                             calibration=self.calibration(temp),
+                                             peak_current_a=peak if math.isfinite(peak) else None)
         except BatteryPredictorError as exc:
             return RuntimeStatus(stamp, math.nan, avg, temp, math.nan, cutoff, False, STATUS_MODEL_FAILED,
                                  f"model failed: {exc}")

@@ -21,6 +21,8 @@ SETTLE_S = 60.0
 #: No single request may describe more than this.
 MAX_SECTIONS = 500
 MAX_ROUTE_DURATION_S = 24 * 3600.0
+#: Shortest driving or standstill part simulated, s.
+MIN_SEGMENT_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -66,10 +68,14 @@ def route_segments(sections: Sequence[RouteSection], standstill_current_a: float
         raise RequestError(f"route has {len(sections)} sections (at most {MAX_SECTIONS})")
     segments = []
     for sec in sections:
-        if sec.length_m > 0:
+        # parts shorter than MIN_SEGMENT_S draw no measurable charge and are skipped (the solver
+        # cannot step over a zero-length interval)
+        if sec.length_m > 0 and sec.travel_s >= MIN_SEGMENT_S:
             segments.append((sec.travel_s, mean_current_a(sec.payload_kg, sec.slope, currents)))
-        if sec.standstill_s > 0:
+        if sec.standstill_s >= MIN_SEGMENT_S:
             segments.append((sec.standstill_s, standstill_current_a))
+    if not segments:
+        raise RequestError(f"route is shorter than {MIN_SEGMENT_S} s in total")
     return segments
 
 
@@ -105,11 +111,11 @@ def evaluate_route(runner: PackRunner, start: float | RunState, sections: Sequen
     duration_s = sum(d for d, _ in segments)
     charge_ah = sum(d * i for d, i in segments) / 3600.0
     if duration_s > MAX_ROUTE_DURATION_S:
-        return rejected(f"route lasts {duration_s / 3600:.1f} h, longer than any battery could run "
+        return rejected(f"route lasts {duration_s / 3600:.3g} h, longer than any battery could run "
                         f"(limit {MAX_ROUTE_DURATION_S / 3600:.0f} h)", threshold_v, duration_s=duration_s,
                         charge_ah=charge_ah, soc=soc)
     if charge_ah > runner.capacity_ah:
-        return rejected(f"route draws {charge_ah:.1f} Ah, more than the full pack holds ({runner.capacity_ah:.1f} Ah)",
+        return rejected(f"route draws {charge_ah:.3g} Ah, more than the full pack holds ({runner.capacity_ah:.1f} Ah)",
                         threshold_v, duration_s=duration_s, charge_ah=charge_ah, soc=soc)
     try:
         run = runner.run(start, [*segments, (settle_s, standstill_current_a)], temperature_k)

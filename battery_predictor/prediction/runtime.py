@@ -59,9 +59,25 @@ def time_to_voltage_s(time_s: np.ndarray, voltage_v: np.ndarray, threshold_v: fl
     return float(t0 + (v0 - threshold_v) / (v0 - v1) * (t1 - t0)) if v0 != v1 else float(t1)
 
 
+def peak_voltage_drop_v(runner: PackRunner, start, average_current_a: float, peak_current_a: float,
+                        temperature_k: float, settle_s: float = 5.0) -> float:
+    """Extra pack voltage drop (V) under ``peak_current_a`` compared to ``average_current_a``.
+
+    Both are simulated for ``settle_s`` (the monitor's 5 s window) from the same state.
+    """
+    if not peak_current_a > average_current_a:
+        return 0.0
+    a = runner.run(start, [(settle_s, average_current_a)], temperature_k)
+    b = runner.run(start, [(settle_s, peak_current_a)], temperature_k)
+    if a.reached_cutoff or b.reached_cutoff:
+        return 0.0
+    return max(0.0, float(np.mean(a.pack_voltage_v) - np.mean(b.pack_voltage_v)))
+
+
 def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: float, temperature_k: float,
                               average_current_a: float, cutoff_voltage_v: float,
-                              calibration: Calibration | None = None) -> RuntimePrediction:
+                              calibration: Calibration | None = None,
+                              peak_current_a: float | None = None) -> RuntimePrediction:
     """Calibrate the SOC (unless given), then simulate the average load to the cut-off.
 
     Parameters
@@ -76,6 +92,11 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
         Pack voltage at which the robot stops (V).
     calibration : Calibration, optional
         An existing calibration of the present state (e.g. on history); else calibrated on the sample.
+    peak_current_a : float, optional
+        Recurring load peak of the present cycle (A). The robot stops when a *measured* 5 s window
+        reaches the cut-off, which happens at a load peak, not at the average load: the pack
+        voltage under the average current is compared with the cut-off raised by the extra drop
+        the peak causes (from the model at the present state).
     """
     if not (math.isfinite(average_current_a) and average_current_a > 0):
         raise SimulationError(f"average discharge current must be > 0 A, got {average_current_a}")
@@ -84,8 +105,10 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
         return RuntimePrediction(0.0, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
     charge_left_ah = max(cal.soc - runner.soc_bounds[0], 0.02) * runner.capacity_ah
     horizon_s = min(MAX_HORIZON_S, 1.5 * charge_left_ah * 3600.0 / average_current_a + 3600.0)
+    drop_v = 0.0 if peak_current_a is None else peak_voltage_drop_v(runner, cal.start, average_current_a,
+                                                                     float(peak_current_a), temperature_k)
     run = runner.run(cal.start, [(horizon_s, average_current_a)], temperature_k)
-    t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
+    t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v + drop_v)
     if t_pack is not None:
         return RuntimePrediction(t_pack, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
     if run.reached_cutoff:

@@ -157,3 +157,26 @@ def test_soc_bounds_extend_beyond_0_and_1_within_stoichiometry(temi_runner):
     for soc in (lo, hi):
         c_n, c_p = temi_runner.concentrations(soc)
         assert 0 < c_n and 0 < c_p
+
+
+def test_tiny_and_huge_sections_get_a_reason_not_an_exception(ranger_core):
+    runner = ranger_core.runner
+    tiny = [RouteSection("tiny", 1e-9, "flat", 20.0)]
+    d = evaluate_route(runner, 0.5, tiny, 298.15, threshold_v=46.31, standstill_current_a=1.7)
+    assert not d.accepted and "shorter than" in d.reason
+    mixed = [RouteSection("tiny", 5e-324, "flat", 20.0), *longest_route(20).sections]
+    assert evaluate_route(runner, 0.5, mixed, 298.15, threshold_v=46.31, standstill_current_a=1.7).accepted
+    huge = [RouteSection("huge", 1e308, "flat", 20.0)]
+    d = evaluate_route(runner, 0.5, huge, 298.15, threshold_v=46.31, standstill_current_a=1.7)
+    assert not d.accepted and len(d.reason) < 200
+
+
+def test_peak_load_option_shortens_the_predicted_runtime():
+    base = dict(params_file=str(PARAMS / "temi.yaml"))
+    runs = {}
+    for q in (0.0, 0.95):
+        core = PredictorCore(PredictorConfig(**base, peak_current_quantile=q))
+        for k in range(60):
+            core.update_state(10.0 * k, 15.2, 4.0 if k % 10 == 0 else 1.5, 298.15)
+        runs[q] = core.remaining_runtime(595.0)
+    assert runs[0.95].remaining_s < runs[0.0].remaining_s
