@@ -1,16 +1,120 @@
 """What each model extension (see :mod:`battery_predictor.extensions`) changes in the PyBaMM model.
 
-Extensions that are PyBaMM model options return them here; extensions that act on
-parameters or the load (capacity fade, current offset, cell imbalance) are applied
-by the diagnosis and stored as fitted values in the params file.
+A params file activates extensions with ``extensions: [name, ...]``; their values live in
+``cell.extra`` (PyBaMM ``"Name [unit]"`` keys, or our own keys with a unit where PyBaMM has
+no parameter). Every simulator and the predictor's :class:`~battery_predictor.prediction.cell_runner.PackRunner`
+build their model through :func:`battery_predictor.simulation.cell_setup.build_model` and their
+parameter values through :func:`~battery_predictor.simulation.cell_setup.prepared_parameter_values`,
+which call the hooks of this module:
+
+=========================  =======================================================================
+extension                  what it changes
+=========================  =======================================================================
+``temperature``            Arrhenius temperature dependence of both particle diffusivities (``...
+                           diffusivity activation energy [J.mol-1]``), which Chen2020 and Prada2013
+                           lack (their exchange-current densities carry one already), and of the pack's
+                           series resistance ``R_eq`` the reference fit found (``Series resistance
+                           activation energy [J.mol-1]``; :func:`series_resistance_factor`, applied by
+                           the fast simulator and the predictor's runner). The cell is isothermal at
+                           the given (measured) temperature, as the predictor runs at the last
+                           measured temperature; with ``Total heat transfer coefficient [W.m-2.K-1]``
+                           in ``cell.extra`` (fitted on data without a temperature measurement) the
+                           PyBaMM ``{"thermal": "lumped"}`` option adds self-heating. Thermal values a
+                           base set lacks (Prada2013) come from Chen2020 and the cell volume
+                           (:data:`THERMAL_DEFAULTS`).
+``capacity_fade``          no new physics: loss of active material and of cyclable lithium are the
+                           PyBaMM volume fractions and initial concentrations written to
+                           ``cell.extra`` by ``diagnose --write-params``.
+``resistance_growth``      PyBaMM ``{"contact resistance": "true"}`` with ``Contact resistance [Ohm]``.
+``current_offset``         the model is driven by (measured current - ``Current sensor offset [A]``)
+                           (:func:`current_offset_a`, applied where a recording's current becomes a
+                           load, ``fitting.problem.request_for_recording``, and to every current the
+                           predictor's runner is given).
+``cell_imbalance``         the cells of one series position hold ``Weak series group capacity
+                           fraction`` of the others' capacity (their electrode area is scaled): per-cell
+                           values for liionpack (:func:`imbalance_cell_inputs`); the fast simulator adds
+                           a second cell for the weak group (:func:`weak_group_params`). Not yet in the
+                           predictor's runner (it simulates the normal cells only).
+``electrolyte_transport``  the SPMe (electrolyte concentration and potential) instead of the SPM,
+                           with the fitted Bruggeman exponent ``Electrolyte Bruggeman coefficient
+                           [-]`` (tortuosity: effective transport = eps ** b) in every region.
+``hysteresis``             PyBaMM's one-state OCP hysteresis (``"open-circuit potential": ("single",
+                           "Axen")``, Axen et al. 2022) in the positive electrode: lithiation and
+                           delithiation OCP = OCP -/+ ``Positive electrode OCP hysteresis half-width
+                           [V]``, decay rate ``Positive particle hysteresis decay rate [-]`` and
+                           initial state ``Initial hysteresis state in positive electrode [-]``
+                           (-1 = discharge branch, +1 = charge branch).
+=========================  =======================================================================
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
+#: Gas constant in J/(mol K).
+R_GAS = 8.314462618
+
+EA_NEG = "Negative particle diffusivity activation energy [J.mol-1]"
+EA_POS = "Positive particle diffusivity activation energy [J.mol-1]"
+EA_SERIES = "Series resistance activation energy [J.mol-1]"
+HEAT_TRANSFER = "Total heat transfer coefficient [W.m-2.K-1]"
+CONTACT_RESISTANCE = "Contact resistance [Ohm]"
+CURRENT_OFFSET = "Current sensor offset [A]"
+WEAK_FRACTION = "Weak series group capacity fraction"
+BRUGGEMAN = "Electrolyte Bruggeman coefficient [-]"
+HYS_HALF_WIDTH = "Positive electrode OCP hysteresis half-width [V]"
+HYS_DECAY = "Positive particle hysteresis decay rate [-]"
+HYS_INITIAL = "Initial hysteresis state in positive electrode [-]"
+
+#: PyBaMM keys the Bruggeman exponent of :data:`BRUGGEMAN` is copied to.
+BRUGGEMAN_KEYS = (
+    "Negative electrode Bruggeman coefficient (electrolyte)",
+    "Separator Bruggeman coefficient (electrolyte)",
+    "Positive electrode Bruggeman coefficient (electrolyte)",
+)
+#: PyBaMM keys of the Axen hysteresis model in the positive electrode.
+PYBAMM_HYS_DECAY_KEYS = ("Positive particle lithiation hysteresis decay rate",
+                         "Positive particle delithiation hysteresis decay rate")
+PYBAMM_HYS_INITIAL_KEY = "Initial hysteresis state in positive electrode"
+
 _OPTIONS = {
-    "temperature": {"thermal": "lumped"},
     "resistance_growth": {"contact resistance": "true"},
+    "hysteresis": {"open-circuit potential": ("single", "Axen")},
 }
+
+#: Default values of each extension's own keys (the extension is then present but neutral, except
+#: the hysteresis, whose neutral value would be no hysteresis).
+EXTENSION_DEFAULTS: dict[str, dict[str, float]] = {
+    "temperature": {EA_NEG: 0.0, EA_POS: 0.0, EA_SERIES: 0.0},
+    "resistance_growth": {CONTACT_RESISTANCE: 0.0},
+    "current_offset": {CURRENT_OFFSET: 0.0},
+    "cell_imbalance": {WEAK_FRACTION: 1.0},
+    "electrolyte_transport": {BRUGGEMAN: 1.5},
+    "hysteresis": {HYS_HALF_WIDTH: 0.0, HYS_DECAY: 50.0, HYS_INITIAL: -1.0},
+}
+
+#: Thermal values a lumped model needs, taken from Chen2020 (LG M50) where the base set lacks them.
+THERMAL_DEFAULTS = {
+    "Negative current collector thickness [m]": 1.2e-05,
+    "Positive current collector thickness [m]": 1.6e-05,
+    "Negative current collector density [kg.m-3]": 8960.0,
+    "Positive current collector density [kg.m-3]": 2700.0,
+    "Negative current collector specific heat capacity [J.kg-1.K-1]": 385.0,
+    "Positive current collector specific heat capacity [J.kg-1.K-1]": 897.0,
+    "Negative current collector conductivity [S.m-1]": 58411000.0,
+    "Positive current collector conductivity [S.m-1]": 36914000.0,
+    "Negative electrode density [kg.m-3]": 1657.0,
+    "Positive electrode density [kg.m-3]": 3262.0,
+    "Separator density [kg.m-3]": 397.0,
+    "Negative electrode specific heat capacity [J.kg-1.K-1]": 700.0,
+    "Positive electrode specific heat capacity [J.kg-1.K-1]": 700.0,
+    "Separator specific heat capacity [J.kg-1.K-1]": 700.0,
+    "Total heat transfer coefficient [W.m-2.K-1]": 10.0,
+}
+#: Height / diameter of the cylindrical cell assumed when the cooling surface is derived from the
+#: cell volume (18650: 3.6, 21700: 3.3, 32700: 2.2; 3.0 is within 10 % of the area for all).
+_CYLINDER_ASPECT = 3.0
 
 
 def extension_model_options(params) -> dict:
@@ -18,4 +122,154 @@ def extension_model_options(params) -> dict:
     opts: dict = {}
     for ext in params.extensions:
         opts.update(_OPTIONS.get(ext, {}))
+    if "temperature" in params.extensions and HEAT_TRANSFER in params.extra:
+        opts["thermal"] = "lumped"  # self-heating was fitted (no measured temperature)
     return opts
+
+
+def series_resistance_factor(params, temperature_k):
+    """Arrhenius factor of the pack's series resistance ``R_eq`` at ``temperature_k`` (1 without the extension).
+
+    The extension ``temperature`` makes the series resistance the reference fit found (interconnect
+    plus the cell's ohmic part the SPM lacks) follow ``exp(E/R (1/T - 1/T_ref))``, T_ref = 298.15 K.
+    """
+    import numpy as np
+
+    if "temperature" not in params.extensions:
+        return np.ones_like(np.asarray(temperature_k, dtype=float))
+    ea = extension_value(params, EA_SERIES)
+    return np.exp(ea / R_GAS * (1.0 / np.asarray(temperature_k, dtype=float) - 1.0 / 298.15))
+
+
+def extension_model_type(params) -> str:
+    """Model class name for ``params``: SPMe when ``electrolyte_transport`` is active on an SPM."""
+    if "electrolyte_transport" in params.extensions and params.model == "SPM":
+        return "SPMe"
+    return params.model
+
+
+def extension_value(params, key: str) -> float:
+    """Value of an extension key: ``cell.extra`` / fitted / manual, else the extension default."""
+    vals = params.cell_values
+    if key in vals:
+        return float(vals[key])
+    for defaults in EXTENSION_DEFAULTS.values():
+        if key in defaults:
+            return float(defaults[key])
+    raise KeyError(key)
+
+
+def current_offset_a(params) -> float:
+    """Current sensor offset in A (pack level) when ``current_offset`` is active, else 0.
+
+    The model is driven by ``measured current - offset``.
+    """
+    if "current_offset" not in params.extensions:
+        return 0.0
+    return extension_value(params, CURRENT_OFFSET)
+
+
+def weak_group_fraction(params) -> float:
+    """Capacity fraction of the weak series group when ``cell_imbalance`` is active, else 1."""
+    if "cell_imbalance" not in params.extensions or params.series < 2:
+        return 1.0
+    return extension_value(params, WEAK_FRACTION)
+
+
+def imbalance_cell_inputs(params) -> dict | None:
+    """Per-cell ``Electrode height [m]`` for liionpack: series position 0 of every string is weak.
+
+    liionpack numbers cells string by string (``parallel-strings`` netlist), so cell
+    ``k * series`` is the first cell of string ``k``. With every string holding one weak cell
+    at the same position, the strings stay identical and the pack equals the two-group
+    model of the fast paths. None when ``cell_imbalance`` is not active.
+    """
+    import numpy as np
+
+    frac = weak_group_fraction(params)
+    if frac == 1.0:
+        return None
+    height = float(params.parameter_values()["Electrode height [m]"])
+    heights = np.full(params.n_cells, height)
+    heights[:: params.series] = height * frac
+    return {"Electrode height [m]": heights}
+
+
+def weak_group_params(params):
+    """The params of one cell of the weak group (electrode height scaled), extensions kept otherwise.
+
+    The group's cells sit in parallel with identical per-area properties, so they share the current
+    in proportion to their area and the group behaves as one cell of the scaled area.
+    """
+    frac = weak_group_fraction(params)
+    height = float(params.parameter_values()["Electrode height [m]"])
+    extra = dict(params.extra)
+    extra["Electrode height [m]"] = height * frac
+    extra[WEAK_FRACTION] = 1.0
+    return replace(params, extra=extra)
+
+
+def _cooling_area_m2(volume_m3: float) -> float:
+    """Surface of a cylinder of ``volume_m3`` with height = :data:`_CYLINDER_ASPECT` x diameter."""
+    d = (4.0 * volume_m3 / (math.pi * _CYLINDER_ASPECT)) ** (1.0 / 3.0)
+    return math.pi * d * (_CYLINDER_ASPECT * d) + 2.0 * math.pi * (d / 2.0) ** 2
+
+
+def _arrhenius_diffusivity(d_ref: float, ea_key: str, t_ref: float):
+    import pybamm
+
+    def diffusivity(sto, T):
+        ea = pybamm.Parameter(ea_key)
+        return d_ref * pybamm.exp(ea / R_GAS * (1.0 / t_ref - 1.0 / T))
+
+    return diffusivity
+
+
+def _shifted_ocp(ocp, sign: float):
+    import pybamm
+
+    def shifted(sto):
+        return ocp(sto) + sign * pybamm.Parameter(HYS_HALF_WIDTH)
+
+    return shifted
+
+
+def apply_extension_parameter_values(params, pv):
+    """Add what the active extensions need to PyBaMM parameter values ``pv`` (modified and returned).
+
+    Called by :func:`~battery_predictor.simulation.cell_setup.prepared_parameter_values`; a no-op
+    for params without extensions.
+    """
+    exts = set(params.extensions)
+    if not exts:
+        return pv
+    keys = set(pv.keys())
+    for ext in exts:
+        for key, val in EXTENSION_DEFAULTS.get(ext, {}).items():
+            if key not in keys:
+                pv.update({key: val}, check_already_exists=False)
+    if "temperature" in exts:
+        missing = {k: v for k, v in THERMAL_DEFAULTS.items() if k not in keys}
+        if "Cell cooling surface area [m2]" not in keys:
+            missing["Cell cooling surface area [m2]"] = _cooling_area_m2(float(pv["Cell volume [m3]"]))
+        pv.update(missing, check_already_exists=False)
+        t_ref = float(pv["Reference temperature [K]"]) if "Reference temperature [K]" in keys else 298.15
+        for domain, ea_key in (("Negative", EA_NEG), ("Positive", EA_POS)):
+            key = f"{domain} particle diffusivity [m2.s-1]"
+            d_ref = pv[key]
+            if isinstance(d_ref, (int, float)):  # a base-set function already carries its own T dependence
+                pv[key] = _arrhenius_diffusivity(float(d_ref), ea_key, t_ref)
+    if "electrolyte_transport" in exts:
+        b = pv[BRUGGEMAN]
+        for key in BRUGGEMAN_KEYS:
+            pv[key] = b
+    if "hysteresis" in exts:
+        ocp = pv["Positive electrode OCP [V]"]
+        if not callable(ocp):
+            raise ValueError("the hysteresis extension needs a positive electrode OCP function")
+        pv.update({"Positive electrode lithiation OCP [V]": _shifted_ocp(ocp, -1.0),
+                   "Positive electrode delithiation OCP [V]": _shifted_ocp(ocp, +1.0)},
+                  check_already_exists=False)
+        pv.update({k: pv[HYS_DECAY] for k in PYBAMM_HYS_DECAY_KEYS}, check_already_exists=False)
+        pv.update({PYBAMM_HYS_INITIAL_KEY: pv[HYS_INITIAL]}, check_already_exists=False)
+    return pv

@@ -47,7 +47,10 @@ def request_for_recording(params: PackParams, rec: Recording, *, initial_state: 
         Continue past the recording for this many seconds at the recording's mean current, so
         that a model which would end later than the measurement shows it (R2_mod's late case).
     """
-    load = StepLoad.from_samples(rec.time_s, rec.current_a)
+    from battery_predictor.diagnosis.extensions_impl import current_offset_a
+
+    # extension current_offset: the cells carry the measured current minus the sensor's offset
+    load = StepLoad.from_samples(rec.time_s, rec.current_a - current_offset_a(params))
     if extend_s > 0:
         load = load.append(StepLoad.constant(max(load.mean_current_a(), 0.0), extend_s))
     if initial_state == "auto":

@@ -87,8 +87,10 @@ def build_model(params, *, for_liionpack: bool = False):
     """A fresh PyBaMM model of the params' type (SPM, SPMe or DFN) with its options."""
     import pybamm
 
+    from battery_predictor.diagnosis.extensions_impl import extension_model_type
+
     cls = {"SPM": pybamm.lithium_ion.SPM, "SPMe": pybamm.lithium_ion.SPMe, "DFN": pybamm.lithium_ion.DFN}[
-        params.model
+        extension_model_type(params)
     ]
     try:
         model = cls(options=model_options(params))
@@ -103,7 +105,9 @@ def build_model(params, *, for_liionpack: bool = False):
 
 def prepared_parameter_values(params):
     """Parameter values ready to simulate a discharge (upper cut-off event relaxed)."""
-    pv = params.parameter_values()
+    from battery_predictor.diagnosis.extensions_impl import apply_extension_parameter_values
+
+    pv = apply_extension_parameter_values(params, params.parameter_values())
     pv["Upper voltage cut-off [V]"] = max(float(pv["Upper voltage cut-off [V]"]), RELAXED_UPPER_CUTOFF_V)
     return pv
 

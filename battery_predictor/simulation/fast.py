@@ -111,7 +111,35 @@ class FastPackSimulator:
                 sol = sim.solve(t_eval=[0.0, t_end], inputs=inputs)
         except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError) as exc:
             raise SimulationError(f"fast simulation failed: {str(exc).splitlines()[0]}") from None
-        return self._result(params, request, sol, tic)
+        result = self._result(params, request, sol, tic)
+        from battery_predictor.diagnosis.extensions_impl import weak_group_fraction
+
+        if weak_group_fraction(params) != 1.0:  # extension cell_imbalance: one weaker series group
+            result = self._with_weak_group(params, request, result, tic)
+        return result
+
+    def _with_weak_group(self, params, request: SimulationRequest, main: PackSimResult, tic: float) -> PackSimResult:
+        """Pack of ``series - 1`` normal groups and one weak group (a second single-group run)."""
+        from dataclasses import replace
+
+        from battery_predictor.diagnosis.extensions_impl import weak_group_params
+
+        ocv = None if request.initial_pack_ocv_v is None else request.initial_pack_ocv_v / params.series
+        weak = self.simulate(replace(weak_group_params(params), series=1), replace(request, initial_pack_ocv_v=ocv))
+        n = min(main.time_s.size, weak.time_s.size)
+        v_n, v_w = main.min_cell_voltage_v[:n], weak.min_cell_voltage_v[:n]
+        i_pack = main.pack_current_a[:n]
+        first = main if main.end_time_s <= weak.end_time_s else weak
+        return PackSimResult(
+            time_s=main.time_s[:n],
+            pack_voltage_v=(params.series - 1) * v_n + v_w - i_pack * main.extra["r_eq_ohm"],
+            pack_current_a=i_pack,
+            min_cell_voltage_v=np.minimum(v_n, v_w),
+            termination=first.termination,
+            end_time_s=first.end_time_s,
+            seconds=time.perf_counter() - tic,
+            extra={**main.extra, "weak_group_cell_voltage_v": v_w},
+        )
 
     # ---------------------------------------------------------------- helpers
     def _simulation(self, params, pv, request: SimulationRequest, input_keys: tuple[str, ...], mapped: bool):
@@ -164,6 +192,11 @@ class FastPackSimulator:
         p = params.interconnect
         r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
                                                  p["r_t_ohm"])
+        if "temperature" in params.extensions:  # extension temperature: Arrhenius series resistance
+            from battery_predictor.diagnosis.extensions_impl import series_resistance_factor
+
+            r_eq = r_eq * series_resistance_factor(
+                params, np.asarray(sol["Volume-averaged cell temperature [K]"](t_eval), dtype=float))
         v_pack = params.series * v_cell - i_pack * r_eq
         if not np.all(np.isfinite(v_pack)):
             raise SimulationError("fast simulation produced non-finite voltages")

@@ -1,0 +1,117 @@
+"""``battery-predictor diagnose``: what the SPM gets wrong on observed data, the cause, the extension that fixes it."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import shlex
+import sys
+
+from battery_predictor.cli.common import print_json
+
+
+def register(sub) -> None:
+    from battery_predictor.extensions import EXTENSION_NAMES
+
+    p = sub.add_parser(
+        "diagnose",
+        help="name the cause of the model's error on observed data (temperature, capacity fade, ...)",
+        description="Fit the baseline on the reference data, then fit each candidate extension and the baseline "
+                    "(same evaluation budget) on the first part of every observed recording and judge them on the "
+                    "held-out rest. Prints the named cause or 'none'.")
+    p.add_argument("--params", required=True, help="params YAML of the pack or cell")
+    p.add_argument("--reference", nargs="+", default=[], metavar="FILE",
+                   help="recordings without the effect; the baseline is fitted on them (omit to use --params as is)")
+    p.add_argument("--data", nargs="+", required=True, metavar="FILE", help="observed recordings (CSV or bag)")
+    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--report", default=None, metavar="DIR", help="write report.md and figures into DIR")
+    p.add_argument("--write-params", default=None, metavar="OUT",
+                   help="write the params with the named extension active and its fitted values")
+    p.add_argument("--budget", type=int, default=None,
+                   help="model evaluations of each observed-data fit, baseline and candidates alike (default 40)")
+    p.add_argument("--reference-budget", type=int, default=None,
+                   help="model evaluations of the reference fit (default 150)")
+    p.add_argument("--fit-fraction", type=float, default=0.6,
+                   help="fraction (in time) of each observed recording used for fitting; the rest is held out")
+    p.add_argument("--causes", nargs="+", choices=EXTENSION_NAMES, default=None,
+                   help="candidate causes to try (default all)")
+    p.add_argument("--trim", action="store_true",
+                   help="trim every recording to its discharge (up to its minimum voltage); default keeps rests "
+                        "and charge phases, which separate some causes")
+    p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
+                   help="average every recording over time windows of SECONDS (dense data such as 1 s drive cycles)")
+    p.add_argument("--duplicate-times", choices=("error", "keep_first", "keep_last"), default="error",
+                   help="CSV rows that repeat a timestamp: reject (default) or keep one")
+    p.add_argument("--seed", type=int, default=0, help="seed of the multistart points (default 0)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="processes for the candidate fits and the reference fit's Jacobian (default: CPUs, at most 4)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=run)
+
+
+def _load(paths, args):
+    from battery_predictor.fitting.problem import trim_to_discharge
+    from battery_predictor.io.loader import load_recording
+
+    recs = [load_recording(p, duplicate_times=args.duplicate_times) for p in paths]
+    if args.trim:
+        recs = [trim_to_discharge(r) for r in recs]
+    if args.resample:
+        from battery_predictor.diagnosis.engine import window_average
+
+        recs = [window_average(r, args.resample) for r in recs]
+    return recs
+
+
+def run(args) -> int:
+    from battery_predictor.diagnosis.diagnose import (
+        DEFAULT_BUDGET,
+        DEFAULT_REFERENCE_BUDGET,
+        default_progress,
+        diagnose,
+    )
+    from battery_predictor.params import load_params
+
+    params = load_params(args.params)
+    observed = _load(args.data, args)
+    references = _load(args.reference, args) if args.reference else []
+    diag = diagnose(params, observed, references,
+                    budget=args.budget or DEFAULT_BUDGET,
+                    reference_budget=args.reference_budget or DEFAULT_REFERENCE_BUDGET,
+                    fit_fraction=args.fit_fraction, causes=args.causes, seed=args.seed,
+                    progress=None if args.quiet else default_progress, workers=args.workers)
+    out = diag.to_json()
+    if args.write_params:
+        extended = diag.extended_params()
+        extended = extended.__class__(**{**extended.__dict__, "provenance": {
+            **dict(extended.provenance),
+            "diagnosed_by": "battery-predictor diagnose",
+            "diagnosed_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+            "cause": diag.cause,
+            "gain_pct": diag.gain_pct,
+            "reference": [str(p) for p in args.reference],
+            "data": [str(p) for p in args.data],
+            "started_from": str(args.params),
+        }})
+        out["params_written"] = str(extended.to_yaml(args.write_params))
+    if args.report:
+        from battery_predictor.diagnosis.report import write_report
+
+        command = "battery-predictor " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv else ""
+        out["report"] = str(write_report(diag, args.report, command=command))
+    if args.json:
+        print_json(out)
+        return 0
+    print(f"cause: {diag.cause}")
+    print(diag.evidence)
+    print(f"baseline held-out RMSE {diag.baseline.heldout_rmse_mV:.1f} mV; extended ({diag.extended.cause}) "
+          f"{diag.extended.heldout_rmse_mV:.1f} mV; gain {diag.gain_pct:.1f} %")
+    for c in diag.candidates:
+        if c.applicable:
+            print(f"  {c.cause:<22} {c.heldout_rmse_mV:9.1f} mV  {c.gain_pct:+7.1f} %")
+        else:
+            print(f"  {c.cause:<22} not applicable: {c.reason}")
+    if args.write_params:
+        print(f"wrote {out['params_written']}")
+    if args.report:
+        print(f"wrote {out['report']}")
+    return 0

@@ -1,0 +1,384 @@
+"""Candidate causes: each a small, physically meaningful extension of the pack model.
+
+Every candidate names its extra parameters with bounds that keep them physical, says how
+it simulates a recording (through :class:`~battery_predictor.diagnosis.engine.Engine`) and
+how its fitted values are written to a params file (``extensions: [name]`` plus
+``cell.extra``), so that ``simulate``, ``fit`` and the predictor use the extended model
+(:mod:`battery_predictor.diagnosis.extensions_impl`).
+
+The initial state of each observed recording (its SOC) is fitted by every candidate and by
+the baseline alike (:data:`Baseline`, the ``none`` candidate has no other parameter).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from battery_predictor.diagnosis import extensions_impl as ext
+from battery_predictor.diagnosis.engine import (
+    C_N0,
+    C_P0,
+    EPS_N,
+    EPS_P,
+    L_N,
+    L_P,
+    Engine,
+    Observed,
+    Post,
+    SimOut,
+)
+from battery_predictor.params import PackParams
+
+
+def _parameter_values(params: PackParams):
+    """``params.parameter_values()`` cached by value (building a PyBaMM set costs ~10 ms)."""
+    key = (params.base_parameter_set, repr(sorted(params.cell_values.items())))
+    if key not in _PV_CACHE:
+        if len(_PV_CACHE) > 64:
+            _PV_CACHE.clear()
+        _PV_CACHE[key] = params.parameter_values()
+    return _PV_CACHE[key]
+
+
+_PV_CACHE: dict = {}
+
+
+@dataclass(frozen=True)
+class CandParam:
+    """One extra parameter of a candidate.
+
+    Attributes
+    ----------
+    name : str
+        Identifier (used in the JSON ``fitted`` mapping).
+    low, high, initial : float
+        Bounds and starting value.
+    log : bool
+        Searched on a log scale.
+    unit : str
+        Unit for reports.
+    """
+
+    name: str
+    low: float
+    high: float
+    initial: float
+    log: bool = False
+    unit: str = ""
+
+    def to_unit(self, u: float) -> float:
+        """Map ``u`` in [0, 1] to the parameter's value."""
+        u = min(max(float(u), 0.0), 1.0)
+        if self.log:
+            return math.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
+        return self.low + u * (self.high - self.low)
+
+    def from_value(self, value: float) -> float:
+        """Map a value to [0, 1]."""
+        value = min(max(float(value), self.low), self.high)
+        if self.log:
+            return (math.log(value) - math.log(self.low)) / (math.log(self.high) - math.log(self.low))
+        return (value - self.low) / (self.high - self.low)
+
+
+class Candidate:
+    """Base class: the baseline itself (no extra parameter); subclasses add one cause each."""
+
+    #: Cause name (one of :data:`battery_predictor.extensions.EXTENSION_NAMES`, or ``"none"``).
+    name = "none"
+    #: What the extension adds, for reports.
+    title = "baseline SPM pack model (state of charge only)"
+    #: Residual features that point to this cause (see :mod:`battery_predictor.diagnosis.residuals`).
+    signature: tuple[str, ...] = ()
+    #: Starts of the fit (the budget is shared among them).
+    starts = 1
+
+    def parameters(self, params: PackParams, observed=None) -> tuple[CandParam, ...]:
+        """The extra parameters and their bounds for ``params`` (and the observed recordings, when given)."""
+        return ()
+
+    def start_points(self, params: PackParams, rng: np.random.Generator, observed=None) -> list[dict[str, float]]:
+        """Starting values of the extra parameters, one dict per start."""
+        base = {p.name: p.initial for p in self.parameters(params, observed)}
+        out = [base]
+        for _ in range(self.starts - 1):
+            out.append({p.name: p.to_unit(rng.uniform(0.15, 0.85)) for p in self.parameters(params, observed)})
+        return out
+
+    def applicable(self, params: PackParams, observed: list[Observed]) -> str | None:
+        """None when the candidate applies, else the reason it does not."""
+        return None
+
+    def structure(self, params: PackParams) -> PackParams:
+        """The params whose model is built (with the extension's options active)."""
+        return params
+
+    def extra_inputs(self) -> tuple[str, ...]:
+        """PyBaMM keys beyond the engine's base inputs that are ``[input]`` in this structure."""
+        return ()
+
+    def ambient_k(self, obs: Observed) -> float:
+        """Ambient temperature (K) of the run: the recording's mean temperature (isothermal)."""
+        return obs.mean_temperature_k
+
+    def concentrations(self, engine: Engine, params: PackParams, theta: dict[str, float], soc: float):
+        """Initial (c_n, c_p) in mol/m3 for ``soc``."""
+        return engine.concentrations_for_soc(params, soc)
+
+    def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict:
+        """Keyword arguments of :meth:`Engine.simulate` (values, post, offset)."""
+        return {}
+
+    def simulate(self, engine: Engine, params: PackParams, obs: Observed, theta: dict[str, float], soc: float,
+                 t_end: float | None = None, want_temperature: bool = False) -> SimOut:
+        """Simulate ``obs`` from ``soc`` with the extra parameters ``theta``."""
+        return engine.simulate(self.structure(params), obs, concentrations=self.concentrations(engine, params, theta, soc),
+                               ambient_k=self.ambient_k(obs), t_end=t_end, extra_inputs=self.extra_inputs(),
+                               want_temperature=want_temperature, **self.run_arguments(params, theta))
+
+    def extended_params(self, params: PackParams, theta: dict[str, float], socs: list[float],
+                        engine: Engine) -> PackParams:
+        """``params`` with this extension active and its fitted values (for ``--write-params``)."""
+        return params
+
+    def _with_extension(self, params: PackParams, extra: dict[str, float]) -> PackParams:
+        exts = tuple(dict.fromkeys([*params.extensions, self.name]))
+        merged = dict(params.extra)
+        merged.update({k: float(v) for k, v in extra.items()})
+        return replace(params, extensions=exts, extra=merged)
+
+
+Baseline = Candidate
+
+
+class Temperature(Candidate):
+    name = "temperature"
+    title = ("Arrhenius temperature dependence of both particle diffusivities and of the series resistance "
+             "(fitted activation energies), the cell following its measured temperature (or, unmeasured, a "
+             "lumped thermal model with a fitted heat transfer coefficient: self-heating)")
+    signature = ("temperature", "current")
+
+    @staticmethod
+    def _measured(obs: Observed) -> bool:
+        return obs.temperature_k is not None and float(np.ptp(obs.temperature_k)) > 0.0
+
+    def parameters(self, params, observed=None):
+        out = (CandParam("diffusivity_activation_energy_J_mol", 0.0, 80000.0, 25000.0, unit="J/mol"),
+               CandParam("series_resistance_activation_energy_J_mol", 0.0, 80000.0, 20000.0, unit="J/mol"))
+        if observed is not None and all(self._measured(o) for o in observed):
+            return out
+        return out + (CandParam("heat_transfer_coefficient_W_m2K", 0.5, 200.0, 10.0, log=True, unit="W/m2/K"),)
+
+    def structure(self, params):
+        return self._with_extension(params, {ext.HEAT_TRANSFER: 10.0})
+
+    def extra_inputs(self):
+        return (ext.EA_NEG, ext.EA_POS, ext.HEAT_TRANSFER)
+
+    def ambient_k(self, obs):
+        return obs.first_temperature_k
+
+    def run_arguments(self, params, theta):
+        ea = theta["diffusivity_activation_energy_J_mol"]
+        values = {ext.EA_NEG: ea, ext.EA_POS: ea}
+        if "heat_transfer_coefficient_W_m2K" in theta:
+            values[ext.HEAT_TRANSFER] = theta["heat_transfer_coefficient_W_m2K"]
+        return {"values": values,
+                "post": Post(series_activation_j_mol=theta["series_resistance_activation_energy_J_mol"])}
+
+    def simulate(self, engine, params, obs, theta, soc, t_end=None, want_temperature=False):
+        measured = self._measured(obs)
+        args = self.run_arguments(params, theta)
+        struct = replace(params, extensions=tuple(dict.fromkeys([*params.extensions, self.name])))
+        if not measured:  # self-heating: the lumped thermal model from the params' ambient temperature
+            struct = self.structure(params)
+            args["values"].setdefault(ext.HEAT_TRANSFER, 10.0)
+        else:
+            args["values"].pop(ext.HEAT_TRANSFER, None)
+        return engine.simulate(struct, obs, concentrations=self.concentrations(engine, params, theta, soc),
+                               ambient_k=self.ambient_k(obs), t_end=t_end,
+                               extra_inputs=(ext.EA_NEG, ext.EA_POS) + (() if measured else (ext.HEAT_TRANSFER,)),
+                               want_temperature=want_temperature, temperature_trace=measured, **args)
+
+    def extended_params(self, params, theta, socs, engine):
+        values = {ext.EA_NEG: theta["diffusivity_activation_energy_J_mol"],
+                  ext.EA_POS: theta["diffusivity_activation_energy_J_mol"],
+                  ext.EA_SERIES: theta["series_resistance_activation_energy_J_mol"]}
+        if "heat_transfer_coefficient_W_m2K" in theta:  # fitted without a measured temperature: self-heating
+            values[ext.HEAT_TRANSFER] = theta["heat_transfer_coefficient_W_m2K"]
+        return self._with_extension(params, values)
+
+
+class CapacityFade(Candidate):
+    name = "capacity_fade"
+    title = ("loss of active material in each electrode (volume fractions scaled) and loss of cyclable "
+             "lithium (inventory scaled)")
+    signature = ("charge_throughput", "soc")
+
+    def parameters(self, params, observed=None):
+        return (CandParam("loss_of_active_material_negative", 0.0, 0.4, 0.02),
+                CandParam("loss_of_active_material_positive", 0.0, 0.4, 0.02),
+                CandParam("loss_of_lithium_inventory", 0.0, 0.4, 0.02))
+
+    @staticmethod
+    def faded(params: PackParams, theta: dict[str, float]) -> PackParams:
+        """``params`` with the volume fractions scaled and initial concentrations carrying the reduced inventory.
+
+        The initial state is then an SOC of the *faded* cell's own window (PyBaMM's definition), so
+        the fitted SOC keeps its meaning while the fade parameters change.
+        """
+        pv = _parameter_values(params)
+        eps_n = float(pv[EPS_N]) * (1 - theta["loss_of_active_material_negative"])
+        eps_p = float(pv[EPS_P]) * (1 - theta["loss_of_active_material_positive"])
+        l_n, l_p = float(pv[L_N]), float(pv[L_P])
+        c_n0, c_p0 = float(pv[C_N0]), float(pv[C_P0])
+        li = (float(pv[EPS_N]) * l_n * c_n0 + float(pv[EPS_P]) * l_p * c_p0) * (1 - theta["loss_of_lithium_inventory"])
+        k = li / (eps_n * l_n * c_n0 + eps_p * l_p * c_p0)
+        return params.with_values({EPS_N: eps_n, EPS_P: eps_p, C_N0: c_n0 * k, C_P0: c_p0 * k})
+
+    def concentrations(self, engine, params, theta, soc):
+        return engine.concentrations_for_soc(self.faded(params, theta), soc)
+
+    def run_arguments(self, params, theta):
+        pv = _parameter_values(params)
+        return {"values": {EPS_N: float(pv[EPS_N]) * (1 - theta["loss_of_active_material_negative"]),
+                           EPS_P: float(pv[EPS_P]) * (1 - theta["loss_of_active_material_positive"])}}
+
+    def extended_params(self, params, theta, socs, engine):
+        faded = self.faded(params, theta)
+        values = {k: faded.fitted[k] for k in (EPS_N, EPS_P)}
+        # initial concentrations: the first recording's fitted start state (same lithium inventory)
+        values[C_N0], values[C_P0] = self.concentrations(engine, params, theta, socs[0] if socs else 1.0)
+        return self._with_extension(params, values)
+
+
+class ResistanceGrowth(Candidate):
+    name = "resistance_growth"
+    title = "film/contact resistance per cell (PyBaMM 'contact resistance' option)"
+    signature = ("current",)
+
+    def parameters(self, params, observed=None):
+        return (CandParam("contact_resistance_ohm", 1e-5, 0.2, 2e-3, log=True, unit="Ohm per cell"),)
+
+    def run_arguments(self, params, theta):
+        return {"post": Post(contact_resistance_ohm=theta["contact_resistance_ohm"])}
+
+    def extended_params(self, params, theta, socs, engine):
+        return self._with_extension(params, {ext.CONTACT_RESISTANCE: theta["contact_resistance_ohm"]})
+
+
+class CurrentOffset(Candidate):
+    name = "current_offset"
+    title = "constant bias of the current sensor (model driven by measured current - offset)"
+    signature = ("time",)
+
+    def parameters(self, params, observed=None):
+        cap = float(params.pack_info.get("nominal_capacity_ah")
+                    or float(params.parameter_values()["Nominal cell capacity [A.h]"]) * params.parallel)
+        bound = 0.1 * cap  # 0.1 C: far above any healthy sensor
+        return (CandParam("current_offset_a", -bound, bound, 0.0, unit="A (pack)"),)
+
+    def run_arguments(self, params, theta):
+        return {"offset_a": theta["current_offset_a"]}
+
+    def extended_params(self, params, theta, socs, engine):
+        return self._with_extension(params, {ext.CURRENT_OFFSET: theta["current_offset_a"]})
+
+
+class CellImbalance(Candidate):
+    name = "cell_imbalance"
+    title = ("one series group of cells with less capacity than the others (electrode area scaled); "
+             "per-cell values in liionpack")
+    signature = ("soc", "charge_throughput")
+
+    def parameters(self, params, observed=None):
+        return (CandParam("weak_group_capacity_fraction", 0.4, 1.0, 0.95),)
+
+    def applicable(self, params, observed):
+        if params.series < 2:
+            return "a single series group has no other group to differ from"
+        return None
+
+    def run_arguments(self, params, theta):
+        return {"post": Post(weak_fraction=theta["weak_group_capacity_fraction"])}
+
+    def extended_params(self, params, theta, socs, engine):
+        return self._with_extension(params, {ext.WEAK_FRACTION: theta["weak_group_capacity_fraction"]})
+
+
+class ElectrolyteTransport(Candidate):
+    name = "electrolyte_transport"
+    title = "electrolyte polarisation (SPMe) with a fitted Bruggeman exponent (tortuosity)"
+    signature = ("current",)
+
+    def parameters(self, params, observed=None):
+        return (CandParam("bruggeman_exponent", 1.0, 6.0, 1.5),)
+
+    def structure(self, params):
+        return self._with_extension(params, {})
+
+    def extra_inputs(self):
+        return ext.BRUGGEMAN_KEYS
+
+    def run_arguments(self, params, theta):
+        return {"values": {k: theta["bruggeman_exponent"] for k in ext.BRUGGEMAN_KEYS}}
+
+    def extended_params(self, params, theta, socs, engine):
+        return self._with_extension(params, {ext.BRUGGEMAN: theta["bruggeman_exponent"]})
+
+
+class Hysteresis(Candidate):
+    name = "hysteresis"
+    title = ("one-state OCP hysteresis in the positive electrode (PyBaMM 'Axen' option): half-width, decay "
+             "rate, initial branch")
+    signature = ("direction",)
+    starts = 2
+
+    def parameters(self, params, observed=None):
+        return (CandParam("hysteresis_half_width_v", 0.0, 0.05, 0.005, unit="V per cell"),
+                CandParam("hysteresis_decay_rate", 1.0, 1000.0, 30.0, log=True, unit="per unit stoichiometry"),
+                CandParam("initial_hysteresis_state", -1.0, 1.0, -0.9))
+
+    def start_points(self, params, rng, observed=None):
+        first = {p.name: p.initial for p in self.parameters(params, observed)}
+        second = dict(first, initial_hysteresis_state=0.9)
+        return [first, second][: max(self.starts, 1)]
+
+    def structure(self, params):
+        return self._with_extension(params, {})
+
+    def extra_inputs(self):
+        return (ext.HYS_HALF_WIDTH, *ext.PYBAMM_HYS_DECAY_KEYS, ext.PYBAMM_HYS_INITIAL_KEY)
+
+    def run_arguments(self, params, theta):
+        values = {ext.HYS_HALF_WIDTH: theta["hysteresis_half_width_v"],
+                  ext.PYBAMM_HYS_INITIAL_KEY: theta["initial_hysteresis_state"]}
+        for k in ext.PYBAMM_HYS_DECAY_KEYS:
+            values[k] = theta["hysteresis_decay_rate"]
+        return {"values": values}
+
+    def extended_params(self, params, theta, socs, engine):
+        # the predictor starts a discharge on the discharge branch
+        return self._with_extension(params, {ext.HYS_HALF_WIDTH: theta["hysteresis_half_width_v"],
+                                             ext.HYS_DECAY: theta["hysteresis_decay_rate"],
+                                             ext.HYS_INITIAL: -1.0})
+
+
+#: Every candidate cause, in the order of :data:`battery_predictor.extensions.EXTENSION_NAMES`.
+CANDIDATES: tuple[Candidate, ...] = (
+    Temperature(), CapacityFade(), ResistanceGrowth(), CurrentOffset(), CellImbalance(), ElectrolyteTransport(),
+    Hysteresis(),
+)
+
+
+def candidate(name: str) -> Candidate:
+    """The candidate called ``name`` (``"none"`` = the baseline)."""
+    if name == "none":
+        return Baseline()
+    for c in CANDIDATES:
+        if c.name == name:
+            return c
+    raise KeyError(name)

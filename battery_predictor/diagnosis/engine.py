@@ -1,0 +1,544 @@
+"""Re-solvable pack simulations for the diagnosis (one build per model structure and recording).
+
+The diagnosis evaluates hundreds of parameter sets on the same recordings, so it cannot
+rebuild a PyBaMM model per evaluation. :class:`Engine` builds each model structure once
+per recording, with every value a fit may change as a PyBaMM ``[input]`` parameter, and
+re-solves it. The pack is simulated as in :class:`~battery_predictor.simulation.fast.FastPackSimulator`
+(identical cells, ``V_pack = series * V_cell - I_pack * R_eq``, the cell current is
+``I_pack / parallel``, the cell lower cut-off ends the run, voltages are right-continuous at
+the report times), so that the diagnosis baseline is the fast simulator's model; a unit test
+checks both agree. What the candidates add on top:
+
+* ``Current sensor offset [A]`` is an input of the current function (the model is driven
+  by the measured current minus the offset);
+* a contact resistance (PyBaMM ``"contact resistance"`` option: ``V = V_internal - I_cell R``)
+  is applied after the solve, which is exact because the contact drop does not feed back
+  into the cell states; the cut-off is then checked on the corrected voltage;
+* a weak series group (cell imbalance) is a second solve of the same model with a smaller
+  electrode height; the pack voltage is ``(series - 1) V_cell + V_weak - I R_eq`` and the run
+  ends when either cell reaches the cut-off.
+
+Electrode thicknesses are folded into the volume fractions for the isothermal SPM (exact, see
+:data:`battery_predictor.simulation.fast.THICKNESS_TO_FRACTION`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from battery_predictor.diagnosis.extensions_impl import R_GAS
+from battery_predictor.errors import InputDataError, SimulationError
+from battery_predictor.params import INTERCONNECT_KEYS, PackParams
+from battery_predictor.recording import Recording
+from battery_predictor.simulation.cell_setup import (
+    INPUT_SAFE_KEYS,
+    build_model,
+    prepared_parameter_values,
+    quiet_pybamm,
+)
+from battery_predictor.simulation.fast import THICKNESS_TO_FRACTION
+from battery_predictor.simulation.load import StepLoad
+from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+_EDGE_S = 1e-3
+C_N0 = "Initial concentration in negative electrode [mol.m-3]"
+C_P0 = "Initial concentration in positive electrode [mol.m-3]"
+EPS_N = "Negative electrode active material volume fraction"
+EPS_P = "Positive electrode active material volume fraction"
+L_N = "Negative electrode thickness [m]"
+L_P = "Positive electrode thickness [m]"
+HEIGHT = "Electrode height [m]"
+T_AMB = "Ambient temperature [K]"
+T_INIT = "Initial temperature [K]"
+OFFSET = "Current sensor offset [A]"
+#: Inputs of every build (state, temperature, the values the plain candidates change).
+BASE_INPUTS = (C_N0, C_P0, T_AMB, T_INIT, EPS_N, EPS_P, HEIGHT, OFFSET)
+#: A recording is taken to end at its cut-off when its last voltage is within this fraction of
+#: its voltage range above its minimum and the last current is a discharge (under a varying
+#: load the lowest voltage may fall on an earlier high-current step).
+_END_AT_MIN_FRACTION = 0.02
+
+
+def is_mesh_free(key: str) -> bool:
+    """True when ``key`` can be an ``[input]`` of a built model (or is folded/post-processed)."""
+    return key in INPUT_SAFE_KEYS or key in THICKNESS_TO_FRACTION or key in INTERCONNECT_KEYS
+
+
+# --------------------------------------------------------------------------- recordings
+@dataclass(frozen=True)
+class Observed:
+    """A recording prepared for simulation and scoring.
+
+    Attributes
+    ----------
+    rec : Recording
+        The recording.
+    t, v, i : numpy.ndarray
+        Time from the first sample (s), voltage (V), current (A, positive = discharge).
+    temperature_k : numpy.ndarray or None
+        Measured temperature (K) or None.
+    load : StepLoad
+        The recorded current (zero-order hold), extended past the end at the last current when
+        the recording ends at its cut-off (so that a model that would run longer shows it, as
+        in R2_mod's Eq. 2).
+    t_split : float
+        Fit part = ``t <= t_split``; held-out part = ``t > t_split``.
+    ends_at_cutoff : bool
+        The recording ends at its minimum voltage under discharge (runtime is defined).
+    mean_temperature_k, first_temperature_k : float
+        Mean and first measured temperature (params ambient when not measured).
+    """
+
+    rec: Recording
+    t: np.ndarray
+    v: np.ndarray
+    i: np.ndarray
+    temperature_k: np.ndarray | None
+    load: StepLoad
+    t_split: float
+    ends_at_cutoff: bool
+    mean_temperature_k: float
+    first_temperature_k: float
+    name: str = ""
+
+    @property
+    def fit_mask(self) -> np.ndarray:
+        return self.t <= self.t_split
+
+    @property
+    def held_mask(self) -> np.ndarray:
+        return self.t > self.t_split
+
+    @property
+    def t_tail(self) -> np.ndarray:
+        """Report times past the recording (for the late-ending case), on the median sample spacing."""
+        dt = float(np.median(np.diff(self.t)))
+        return np.arange(self.t[-1] + dt, self.load.end_s - 2 * _EDGE_S, dt)
+
+    def cumulative_charge_ah(self) -> np.ndarray:
+        """Charge drawn since the start at each sample (Ah, signed, discharge positive)."""
+        return self.load.cumulative_charge_as(self.t) / 3600.0
+
+
+def ends_at_cutoff(rec: Recording) -> bool:
+    """True when the recording ends at its minimum voltage while discharging."""
+    v = np.asarray(rec.voltage_v, dtype=float)
+    span = float(v.max() - v.min())
+    return bool(span > 0 and v[-1] - v.min() <= _END_AT_MIN_FRACTION * span and rec.current_a[-1] > 0)
+
+
+def window_average(rec: Recording, period_s: float) -> Recording:
+    """Time-window averages of ``rec`` (the seed paper's processing: 10 Hz data averaged to 5 s).
+
+    Each row is the mean of the samples in one window of ``period_s``: time, voltage, current and
+    temperature; empty windows are dropped. Dense recordings (drive cycles at 1 s) cost a solver
+    restart per current change; averaging them keeps the charge and the slow dynamics.
+    """
+    if period_s <= 0:
+        raise InputDataError(f"resample period must be > 0 s, got {period_s}")
+    t = rec.relative_time_s
+    idx = np.floor(t / period_s).astype(int)
+    _, start, counts = np.unique(idx, return_index=True, return_counts=True)
+
+    def mean(x):
+        return np.add.reduceat(np.asarray(x, dtype=float), start) / counts
+
+    temp = None if rec.temperature_k is None else mean(rec.temperature_k)
+    return Recording(time_s=rec.time_s[0] + mean(t), voltage_v=mean(rec.voltage_v), current_a=mean(rec.current_a),
+                     temperature_k=temp, source=rec.source, metadata=dict(rec.metadata))
+
+
+def observe(rec: Recording, params: PackParams, fit_fraction: float = 0.6, tail_fraction: float = 0.2,
+            name: str = "") -> Observed:
+    """Prepare ``rec`` for the diagnosis: load (with tail), split time, temperatures."""
+    if len(rec.time_s) < 10:
+        raise InputDataError(f"{rec.source}: too few samples ({len(rec.time_s)}) to diagnose")
+    if not 0.1 <= fit_fraction <= 0.95:
+        raise InputDataError(f"fit fraction must be within 0.1..0.95, got {fit_fraction}")
+    t = rec.relative_time_s
+    load = StepLoad.from_samples(rec.time_s, rec.current_a)
+    end_cut = ends_at_cutoff(rec)
+    if end_cut and tail_fraction > 0:
+        # the load that ended the recording continues (a recording often ends on a current spike)
+        tail_current = float(rec.current_a[-1])
+        load = load.append(StepLoad.constant(tail_current, tail_fraction * float(t[-1])))
+    temp = None
+    if rec.temperature_k is not None and np.isfinite(rec.temperature_k).all():
+        temp = np.asarray(rec.temperature_k, dtype=float)
+    mean_t = rec.mean_temperature_k(params.ambient_temperature_k)
+    first_t = float(temp[0]) if temp is not None else params.ambient_temperature_k
+    return Observed(rec=rec, t=t, v=np.asarray(rec.voltage_v, float), i=np.asarray(rec.current_a, float),
+                    temperature_k=temp, load=load, t_split=fit_fraction * float(t[-1]), ends_at_cutoff=end_cut,
+                    mean_temperature_k=mean_t, first_temperature_k=first_t, name=name or str(rec.source))
+
+
+# --------------------------------------------------------------------------- results
+@dataclass
+class SimOut:
+    """A simulated recording.
+
+    Attributes
+    ----------
+    t : numpy.ndarray
+        Report times (s) up to the end of the run (measurement times, then the tail grid).
+    v_pack : numpy.ndarray
+        Pack voltage (V) at ``t``.
+    v_cell_min : numpy.ndarray
+        Lowest cell voltage (V).
+    reached_cutoff : bool
+        A cell reached its cut-off before the end of the load.
+    end_time_s : float
+        When the run ended.
+    temperature_k : numpy.ndarray or None
+        Cell temperature (K) when the model computes one.
+    """
+
+    t: np.ndarray
+    v_pack: np.ndarray
+    v_cell_min: np.ndarray
+    reached_cutoff: bool
+    end_time_s: float
+    temperature_k: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Post:
+    """What is applied after the cell solve.
+
+    Attributes
+    ----------
+    contact_resistance_ohm : float
+        Contact resistance per cell (Ohm).
+    weak_fraction : float
+        Capacity fraction of the weak series group (1 = none).
+    series_activation_j_mol : float
+        Arrhenius activation energy of the pack's series resistance ``R_eq`` (fitted at the
+        reference temperature): at cell temperature T it is ``R_eq exp(E/R (1/T - 1/T_ref))``.
+    """
+
+    contact_resistance_ohm: float = 0.0
+    weak_fraction: float = 1.0
+    series_activation_j_mol: float = 0.0
+
+
+# --------------------------------------------------------------------------- engine
+class Engine:
+    """Builds each (structure, recording) once and re-solves it with ``[input]`` values.
+
+    Parameters
+    ----------
+    rtol, atol : float
+        IDAKLU tolerances (as the fast simulator).
+    cache_size : int
+        Built simulations kept.
+    """
+
+    def __init__(self, rtol: float = 1e-5, atol: float = 1e-7, cache_size: int = 48) -> None:
+        self.rtol = rtol
+        self.atol = atol
+        self.cache_size = cache_size
+        self._cache: OrderedDict = OrderedDict()
+        self._windows: dict = {}
+        self.builds = 0
+        self.solves = 0
+
+    # ------------------------------------------------------------------ state
+    def stoichiometry_window(self, params: PackParams) -> tuple[float, float, float, float]:
+        """(x_0%, x_100%, y_100%, y_0%) of ``params``, as PyBaMM's ``get_min_max_stoichiometries``.
+
+        The electrode stoichiometries at which the open-circuit voltage equals the params'
+        ``Open-circuit voltage at 0% / 100% SOC [V]`` with the lithium inventory of the initial
+        concentrations, solved on tabulated OCPs (PyBaMM's own solver takes ~0.15 s a call, too slow
+        inside a fit; a unit test checks both agree).
+        """
+        key = (params.base_parameter_set, repr(sorted(params.cell_values.items())))
+        if key not in self._windows:
+            pv = self.parameter_values(params)
+            tables = self._ocp_tables(params, pv)
+            n_n, n_p, li = self.loadings(pv, {})
+            x100 = _solve_ocv(tables, n_n, n_p, li, float(pv["Open-circuit voltage at 100% SOC [V]"]))
+            x0 = _solve_ocv(tables, n_n, n_p, li, float(pv["Open-circuit voltage at 0% SOC [V]"]))
+            self._windows[key] = (x0, x100, (li - n_n * x100) / n_p, (li - n_n * x0) / n_p)
+        return self._windows[key]
+
+    def _ocp_tables(self, params: PackParams, pv) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        key = ("ocp", params.base_parameter_set, repr(pv["Negative electrode OCP [V]"]),
+               repr(pv["Positive electrode OCP [V]"]))
+        if key not in self._windows:
+            grid = np.linspace(1e-6, 1.0 - 1e-6, 20001)
+            self._windows[key] = (grid, _evaluate_ocp(pv["Negative electrode OCP [V]"], grid),
+                                  _evaluate_ocp(pv["Positive electrode OCP [V]"], grid))
+        return self._windows[key]
+
+    def parameter_values(self, params: PackParams):
+        """``params.parameter_values()``, cached (do not modify the result)."""
+        key = ("pv", params.base_parameter_set, repr(sorted(params.cell_values.items())))
+        if key not in self._windows:
+            if len(self._windows) > 512:
+                self._windows.clear()
+            self._windows[key] = params.parameter_values()
+        return self._windows[key]
+
+    @staticmethod
+    def loadings(pv, values: dict) -> tuple[float, float, float]:
+        """Per-area electrode capacities and lithium inventory (mol/m2): (n_neg, n_pos, n_li)."""
+        def get(k):
+            return float(values.get(k, pv[k]))
+
+        n_n = get(EPS_N) * get(L_N) * float(pv["Maximum concentration in negative electrode [mol.m-3]"])
+        n_p = get(EPS_P) * get(L_P) * float(pv["Maximum concentration in positive electrode [mol.m-3]"])
+        li = get(EPS_N) * get(L_N) * get(C_N0) + get(EPS_P) * get(L_P) * get(C_P0)
+        return n_n, n_p, li
+
+    def concentrations_for_soc(self, params: PackParams, soc: float, *, eps_scale=(1.0, 1.0),
+                               lithium_scale: float = 1.0) -> tuple[float, float]:
+        """Initial (c_n, c_p) in mol/m3 for ``soc`` in the params' window.
+
+        ``x = x0 + soc (x100 - x0)`` in the negative electrode (PyBaMM's linear SOC), and the
+        positive stoichiometry from the lithium inventory, which a capacity-fade candidate
+        scales (``lithium_scale``) together with the active material (``eps_scale``). With both
+        at 1 this is PyBaMM's ``get_initial_stoichiometries``.
+        """
+        pv = self.parameter_values(params)
+        x0, x100, _, _ = self.stoichiometry_window(params)
+        n_n, n_p, li = self.loadings(pv, {})
+        n_n *= eps_scale[0]
+        n_p *= eps_scale[1]
+        x = x0 + soc * (x100 - x0)
+        y = (li * lithium_scale - n_n * x) / n_p
+        c_n_max = float(pv["Maximum concentration in negative electrode [mol.m-3]"])
+        c_p_max = float(pv["Maximum concentration in positive electrode [mol.m-3]"])
+        if not (0.0 < x < 1.0 and 0.0 < y < 1.0):
+            raise SimulationError(f"initial state outside the electrodes' range (x={x:.3f}, y={y:.3f})")
+        return x * c_n_max, y * c_p_max
+
+    # ------------------------------------------------------------------ builds
+    def _build(self, params: PackParams, obs: Observed, input_keys: tuple[str, ...], temperature_trace: bool = False):
+        import pybamm
+
+        mapped = _thickness_mappable(params)
+        key = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions,
+               repr(sorted((k, v) for k, v in params.cell_values.items()
+                           if k not in input_keys and not (mapped and k in THICKNESS_TO_FRACTION))),
+               input_keys, obs.load.digest(), params.parallel, mapped, temperature_trace)
+        if key in self._cache:
+            self._cache.move_to_end(key)
+            return self._cache[key]
+        pv = prepared_parameter_values(params)
+        built_thickness = {k: float(pv[k]) for k in THICKNESS_TO_FRACTION} if mapped else {}
+        for k in input_keys:
+            pv.update({k: "[input]"}, check_already_exists=False)
+        edges = obs.load.edges_s()
+        knots_t = np.column_stack([edges[:-1], edges[1:] - _EDGE_S]).ravel()
+        knots_i = np.repeat(obs.load.current_a / params.parallel, 2)
+        interp = pybamm.Interpolant(knots_t, knots_i, pybamm.t, interpolator="linear")
+        pv["Current function [A]"] = interp - pybamm.Parameter(OFFSET) / params.parallel
+        if temperature_trace:  # isothermal cell at the measured temperature, a function of time
+            t_meas = np.append(obs.t, obs.load.end_s + 1.0)
+            temp = np.append(obs.temperature_k, obs.temperature_k[-1])
+            trace = pybamm.Interpolant(t_meas, temp, pybamm.t, interpolator="linear")
+            pv.update({T_AMB: lambda y, z, t: trace, T_INIT: float(obs.temperature_k[0])})
+        try:
+            with quiet_pybamm():
+                sim = pybamm.Simulation(build_model(params), parameter_values=pv,
+                                        solver=pybamm.IDAKLUSolver(rtol=self.rtol, atol=self.atol))
+                sim.build()
+        except Exception as exc:  # noqa: BLE001 - any build failure is a model failure here
+            raise SimulationError(f"cannot build the cell model: {str(exc).splitlines()[0]}") from None
+        self.builds += 1
+        pv_num = prepared_parameter_values(params)
+        entry = (sim, built_thickness, pv_num)
+        self._cache[key] = entry
+        if len(self._cache) > self.cache_size:
+            self._cache.popitem(last=False)
+        return entry
+
+    # ------------------------------------------------------------------ runs
+    def simulate(self, params: PackParams, obs: Observed, *, values: dict | None = None,
+                 concentrations: tuple[float, float], ambient_k: float, t_end: float | None = None,
+                 extra_inputs: tuple[str, ...] = (), post: Post = Post(), offset_a: float = 0.0,
+                 want_temperature: bool = False, temperature_trace: bool = False) -> SimOut:
+        """Simulate ``obs`` with ``params`` updated by ``values`` (input keys, thickness, r_b/r_c).
+
+        Parameters
+        ----------
+        values : dict
+            Overrides: any key of :data:`BASE_INPUTS`, ``extra_inputs``, thicknesses (folded
+            into the volume fractions) and interconnect resistances.
+        concentrations : (float, float)
+            Initial (c_n, c_p) in mol/m3.
+        ambient_k : float
+            Ambient (and initial) temperature in K.
+        t_end : float, optional
+            Stop at this time (s); default the end of the load (recording + tail).
+        extra_inputs : tuple of str
+            PyBaMM keys (beyond :data:`BASE_INPUTS`) that are inputs of this structure.
+        post : Post
+            Contact resistance and weak group applied after the solve.
+        offset_a : float
+            Current sensor offset (A, pack level).
+        temperature_trace : bool
+            The (isothermal) cell follows the recording's measured temperature instead of ``ambient_k``.
+        """
+        import pybamm
+
+        values = dict(values or {})
+        offset_a = float(values.pop(OFFSET, offset_a))
+        value_inputs = {k for k in values if k in INPUT_SAFE_KEYS}
+        unused = set(values) - value_inputs - set(extra_inputs) - set(THICKNESS_TO_FRACTION) - set(INTERCONNECT_KEYS)
+        if unused:
+            raise SimulationError(f"cannot vary {', '.join(sorted(unused))} without rebuilding the model")
+        input_keys = set(BASE_INPUTS) | set(extra_inputs) | value_inputs
+        if temperature_trace:
+            if obs.temperature_k is None:
+                raise SimulationError(f"{obs.name}: no measured temperature to follow")
+            input_keys -= {T_AMB, T_INIT}
+        input_keys = tuple(sorted(input_keys))
+        sim, built_thickness, pv = self._build(params, obs, input_keys, temperature_trace)
+        inputs = {}
+        for k in input_keys:
+            if k in values:
+                inputs[k] = float(values[k])
+            elif k == OFFSET:
+                inputs[k] = float(offset_a)
+            elif k in (T_AMB, T_INIT):
+                inputs[k] = float(ambient_k)
+            elif k in (C_N0, C_P0):
+                continue
+            else:
+                val = pv[k]
+                if not isinstance(val, (int, float)):
+                    raise SimulationError(f"'{k}' is not a scalar in {params.base_parameter_set}; it cannot be fitted")
+                inputs[k] = float(val)
+        inputs[C_N0], inputs[C_P0] = concentrations
+        for thick_key, frac_key in THICKNESS_TO_FRACTION.items():
+            if thick_key in built_thickness:
+                inputs[frac_key] *= float(values.get(thick_key, built_thickness[thick_key])) / built_thickness[thick_key]
+        t_stop = float(obs.load.end_s) - _EDGE_S if t_end is None else min(float(t_end) + 3 * _EDGE_S,
+                                                                          float(obs.load.end_s) - _EDGE_S)
+        runs = [inputs]
+        if post.weak_fraction != 1.0:
+            weak = dict(inputs)
+            weak[HEIGHT] = inputs[HEIGHT] * post.weak_fraction
+            runs.append(weak)
+        sols = []
+        for inp in runs:
+            try:
+                with quiet_pybamm():
+                    sols.append(sim.solve(t_eval=[0.0, t_stop], inputs=inp))
+            except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError) as exc:
+                raise SimulationError(f"simulation failed: {str(exc).splitlines()[0]}") from None
+            self.solves += 1
+        r_eq = self._r_eq(params, values)
+        return self._result(params, obs, sols, t_end, r_eq, post, offset_a, pv, want_temperature)
+
+    @staticmethod
+    def _r_eq(params: PackParams, values: dict) -> float:
+        p = dict(params.interconnect)
+        for k in INTERCONNECT_KEYS:
+            if k in values:
+                p[k] = float(values[k])
+        return equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
+                                                 p["r_t_ohm"])
+
+    def _result(self, params, obs: Observed, sols, t_end, r_eq, post: Post, offset_a, pv,
+                want_temperature) -> SimOut:
+        t_all = np.concatenate([obs.t, obs.t_tail])
+        if t_end is not None:
+            t_all = t_all[t_all <= t_end + 1e-9]
+        cutoff_v = float(pv["Lower voltage cut-off [V]"])
+        ends = [float(s.t[-1]) for s in sols]
+        t_sol_end = min(ends)
+        keep = np.minimum(t_all + 2 * _EDGE_S, obs.load.end_s - 2 * _EDGE_S) <= t_sol_end + 1e-9
+        t_out = t_all[keep]
+        t_eval = np.minimum(t_out + 2 * _EDGE_S, obs.load.end_s - 2 * _EDGE_S)
+        i_pack = obs.load.current_at(t_out) - offset_a
+        i_cell = i_pack / params.parallel
+        v_cells = [np.asarray(s["Terminal voltage [V]"](t_eval), dtype=float) - i_cell * post.contact_resistance_ohm
+                   for s in sols]
+        temp = None
+        if want_temperature or post.series_activation_j_mol:
+            temp = np.asarray(sols[0]["Volume-averaged cell temperature [K]"](t_eval), dtype=float)
+        if post.series_activation_j_mol:
+            excess = r_eq * (np.exp(post.series_activation_j_mol / R_GAS * (1.0 / temp - 1.0 / 298.15)) - 1.0)
+            v_cells = [v - i_pack * excess / params.series for v in v_cells]
+        reached = any(s.termination and "Minimum voltage" in str(s.termination) for s in sols)
+        if len(v_cells) == 1:
+            v_pack = params.series * v_cells[0]
+            v_min = v_cells[0]
+        else:
+            v_pack = (params.series - 1) * v_cells[0] + v_cells[1]
+            v_min = np.minimum(v_cells[0], v_cells[1])
+        v_pack = v_pack - i_pack * r_eq
+        below = np.nonzero(v_min < cutoff_v)[0]
+        if below.size:  # the corrected voltage (contact drop / weak cell) reaches the cut-off first
+            n = max(int(below[0]), 1)
+            t_out, v_pack, v_min, t_eval = t_out[:n], v_pack[:n], v_min[:n], t_eval[:n]
+            reached = True
+            t_sol_end = float(t_out[-1])
+        if temp is not None:
+            temp = temp[: t_out.size]
+        if not np.all(np.isfinite(v_pack)):
+            raise SimulationError("simulation produced non-finite voltages")
+        return SimOut(t=t_out, v_pack=v_pack, v_cell_min=v_min, reached_cutoff=bool(reached),
+                      end_time_s=float(t_sol_end), temperature_k=temp)
+
+
+def _evaluate_ocp(fn, sto: np.ndarray) -> np.ndarray:
+    """An OCP of a PyBaMM parameter set (function of stoichiometry, or data) on ``sto``."""
+    import inspect
+
+    import pybamm
+
+    if isinstance(fn, tuple):  # (name, (x, y)) data
+        x, y = fn[1]
+        return np.interp(sto, np.asarray(x, float).ravel(), np.asarray(y, float).ravel())
+    if not callable(fn):
+        raise SimulationError(f"unsupported OCP parameter {fn!r}")
+    n_args = len(inspect.signature(fn).parameters)
+    args = [pybamm.Vector(sto)] + [pybamm.Scalar(298.15)] * (n_args - 1)
+    out = fn(*args)
+    val = out.evaluate() if isinstance(out, pybamm.Symbol) else out
+    return np.asarray(val, dtype=float).ravel()
+
+
+def _solve_ocv(tables, n_n: float, n_p: float, li: float, ocv_v: float) -> float:
+    """Negative stoichiometry x at which U_p(y) - U_n(x) = ``ocv_v`` with n_n x + n_p y = li."""
+    grid, u_n, u_p = tables
+    lo = max(grid[0], (li - n_p * grid[-1]) / n_n)
+    hi = min(grid[-1], (li - n_p * grid[0]) / n_n)
+    if not lo < hi:
+        raise SimulationError("the lithium inventory does not fit into the electrodes")
+    x = np.linspace(lo, hi, 4001)
+    y = (li - n_n * x) / n_p
+    f = np.interp(y, grid, u_p) - np.interp(x, grid, u_n) - ocv_v
+    sign = np.nonzero(np.diff(np.sign(f)) != 0)[0]
+    if sign.size == 0:
+        raise SimulationError(f"no state of the electrodes has an open-circuit voltage of {ocv_v:.3f} V")
+    i = int(sign[0])
+    return float(x[i] - f[i] * (x[i + 1] - x[i]) / (f[i + 1] - f[i]))
+
+
+def _thickness_mappable(params: PackParams) -> bool:
+    """Thickness folds into the volume fraction only in the isothermal SPM without options."""
+    return params.model == "SPM" and not params.options and not params.extensions
+
+
+def soc_from_voltage(engine: Engine, params: PackParams, cell_voltage_v: float) -> float:
+    """SOC (0..1, params' window) whose open-circuit voltage is ``cell_voltage_v`` (0.5 when it fails)."""
+    import pybamm
+
+    try:
+        pv = params.parameter_values()
+        with quiet_pybamm():
+            x, _ = pybamm.lithium_ion.get_initial_stoichiometries(f"{cell_voltage_v} V", pv)
+        x0, x100, _, _ = engine.stoichiometry_window(params)
+        soc = (float(x) - x0) / (x100 - x0)
+        return float(min(max(soc, 0.0), 1.0)) if math.isfinite(soc) else 0.5
+    except Exception:  # noqa: BLE001 - outside the OCV range: fall back
+        return 0.5
