@@ -21,9 +21,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from battery_predictor.errors import ProfileError
+from battery_predictor.jsonutil import json_default as _json_default
 from battery_predictor.profiles.load_profile import LoadProfile
 from battery_predictor.profiles.psu_export import write_psu_csv
 from battery_predictor.profiles.ranger import (
@@ -177,11 +176,3 @@ def _emit(kind: str, profile: LoadProfile, args: argparse.Namespace) -> int:
     return 0
 
 
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

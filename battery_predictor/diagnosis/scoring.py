@@ -131,23 +131,27 @@ def pooled(scores: list[HeldOut]) -> dict[str, float | None]:
 
 
 def noise_level_v(obs_list: list[Observed]) -> float:
-    """Measurement noise of the voltage (V): robust spread of sample-to-sample changes at constant current.
+    """Measurement noise of the voltage (V): robust spread of second differences at constant current.
 
-    At least the quantisation noise of the recorded resolution (step / sqrt(12)).
+    Second differences ``v[k+1] - 2 v[k] + v[k-1]`` over three samples of the same current remove
+    the slow drift of the state of charge; their median absolute deviation (x 1.4826 / sqrt(6)) is
+    the noise. At least the quantisation noise of the recorded resolution (step / sqrt(12)).
     """
-    diffs, steps = [], []
+    d2s, steps = [], []
     for obs in obs_list:
-        dv = np.diff(obs.v)
-        same = np.abs(np.diff(obs.i)) <= 1e-3 * max(float(np.max(np.abs(obs.i))), 1e-9)
-        if same.sum() > 10:
-            d = dv[same]
-            diffs.append(d - np.median(d))
-        nz = np.abs(dv[np.abs(dv) > 0])
+        v, i = obs.v, obs.i
+        tol = 1e-3 * max(float(np.max(np.abs(i))), 1e-9)
+        same = (np.abs(i[1:-1] - i[:-2]) <= tol) & (np.abs(i[2:] - i[1:-1]) <= tol)
+        d2 = (v[2:] - 2.0 * v[1:-1] + v[:-2])[same]
+        if d2.size > 10:
+            d2s.append(d2)
+        dv = np.abs(np.diff(v))
+        nz = dv[dv > 0]
         if nz.size:
             steps.append(float(np.min(nz)))
     sigma = 0.0
-    if diffs:
-        d = np.concatenate(diffs)
-        sigma = 1.4826 * float(np.median(np.abs(d))) / math.sqrt(2.0)
+    if d2s:
+        d = np.concatenate(d2s)
+        sigma = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(6.0)
     quant = (min(steps) / math.sqrt(12.0)) if steps else 0.0
     return max(sigma, quant)

@@ -117,6 +117,7 @@ from battery_predictor.conventions import (
 )
 from battery_predictor.errors import BagError, BatteryPredictorError, InputDataError
 from battery_predictor.io.csv_io import check_current_sign, check_temperature_k, check_units
+from battery_predictor.jsonutil import json_default as _json_default
 from battery_predictor.recording import Recording
 
 STYLES = ("battery_state", "relay")
@@ -163,16 +164,6 @@ def _one_line(text: str) -> str:
 # ---------------------------------------------------------------------------
 
 
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, (set, frozenset, tuple)):
-        return list(value)
-    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
 
 
 def _looks_like_bag_dir(path: Path) -> bool:

@@ -47,6 +47,7 @@ import numpy as np
 
 from battery_predictor import __version__
 from battery_predictor.errors import BatteryPredictorError, SimulationError
+from battery_predictor.jsonutil import json_default as _json_default
 from battery_predictor.lab import LAB_VERSION
 from battery_predictor.lab.instruments import InstrumentSpec, measure
 from battery_predictor.lab.real_pack import SURFACE_18650_M2, SURFACE_32700_M2, RealPack, RealPackSpec
@@ -252,14 +253,6 @@ def bisect_initial_soc(end_voltage: Callable[[float], float], target_v: float, *
     return high, v_high, n
 
 
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(type(value).__name__)
 
 
 def _profile_record(profile, end_s: float | None = None) -> dict[str, Any]:
