@@ -140,8 +140,8 @@ def history_segments(time_s, current_a, max_segments: int = 24) -> list[tuple[fl
 
 
 def calibrate_on_history(runner: PackRunner, time_s, voltage_v, current_a, temperature_k: float, *,
-                         window_s: float = 600.0, match_s: float = 120.0, max_segments: int = 24,
-                         tol_soc: float = 1e-4) -> Calibration:
+                         window_s: float = 600.0, match_s: float = 120.0, max_segments: int = 12,
+                         tol_soc: float = 5e-4) -> Calibration:
     """Calibrate on the last ``window_s`` of history; returns the present SOC and state.
 
     Parameters
