@@ -3,11 +3,13 @@
 For each pack, a synthetic 6 h reference day (healthy) and a 6 h observed day (the same pack with a
 grown contact resistance) are simulated with the fast pack simulator at the paper's 5 s resolution
 (Temi: the stochastic usage at 2x current with a 1 h charging stop; Ranger: random luggage jobs on
-the station graph), written as CSV, and ``battery-predictor diagnose --json`` is run on them as a
+the station graph) with 4 mV voltage noise and 20 mA current-sensor noise (so that nearly every
+sample is a new current step, the solver's worst case), written as CSV, and ``battery-predictor diagnose --json`` is run on them as a
 subprocess. Prints wall seconds, peak resident memory (largest process: the CLI or one of its
 fit workers), the named cause and the gain.
 
 Usage: .venv/bin/python benchmarks/diagnose_speed.py [--packs temi ranger_mini] [--hours 6] [--workers N]
+       [--current-noise 0.02]
 """
 
 from __future__ import annotations
@@ -60,23 +62,26 @@ def _load(pack: str, hours: float, seed: int) -> tuple[StepLoad, float]:
     return load.truncate(hours * 3600.0), 0.9
 
 
-def _recording(params, load: StepLoad, soc0: float, seed: int) -> Recording:
+def _recording(params, load: StepLoad, soc0: float, seed: int, current_noise_a: float) -> Recording:
     stepped = load.resample(SAMPLE_S)
     t = np.arange(0.0, stepped.end_s, SAMPLE_S)
     res = FastPackSimulator().simulate(params, SimulationRequest(load=stepped, initial_soc=soc0, output_time_s=t))
     rng = np.random.default_rng(seed)
     v = np.round(res.pack_voltage_v + rng.normal(0.0, 0.004, res.time_s.size), 2)
-    return Recording(res.time_s, v, np.round(res.pack_current_a, 2), np.full(res.time_s.size, 298.15))
+    # a current sensor's noise makes (nearly) every sample a new current step: the solver's worst case
+    i = np.round(res.pack_current_a + rng.normal(0.0, current_noise_a, res.time_s.size), 2)
+    return Recording(res.time_s, v, i, np.full(res.time_s.size, 298.15))
 
 
-def bench(pack: str, hours: float, workers: int | None, tmp: Path) -> dict:
+def bench(pack: str, hours: float, workers: int | None, tmp: Path, current_noise_a: float = 0.02) -> dict:
     params = load_params(REPO / "params" / f"{pack}.yaml")
     ref_load, soc0 = _load(pack, hours, 1)
     obs_load, _ = _load(pack, hours, 2)
     r_contact = 0.03 if pack == "temi" else 0.012
     aged = replace(params, extensions=("resistance_growth",), extra={"Contact resistance [Ohm]": r_contact})
-    ref = save_csv(_recording(params, ref_load, soc0, 3), tmp / f"{pack}_reference.csv", overwrite=True)
-    obs_rec = _recording(aged, obs_load, soc0, 4)
+    ref = save_csv(_recording(params, ref_load, soc0, 3, current_noise_a), tmp / f"{pack}_reference.csv",
+                   overwrite=True)
+    obs_rec = _recording(aged, obs_load, soc0, 4, current_noise_a)
     obs = save_csv(obs_rec, tmp / f"{pack}_observed.csv", overwrite=True)
     cmd = [str(Path(sys.executable).parent / "battery-predictor"), "diagnose", "--params",
            str(REPO / "params" / f"{pack}.yaml"), "--reference", str(ref), "--data", str(obs), "--json", "--quiet"]
@@ -100,10 +105,12 @@ def main() -> int:
     ap.add_argument("--packs", nargs="+", default=["temi", "ranger_mini"])
     ap.add_argument("--hours", type=float, default=6.0)
     ap.add_argument("--workers", type=int, default=None, help="diagnose --workers (default: the CLI's default)")
+    ap.add_argument("--current-noise", type=float, default=0.02,
+                    help="current sensor noise in A (std); 0 keeps the profile's steps only")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
         for pack in args.packs:
-            r = bench(pack, args.hours, args.workers, Path(d))
+            r = bench(pack, args.hours, args.workers, Path(d), args.current_noise)
             peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
             print(f"{r['pack']}: {r['hours']:.2f} h observed + reference, {r['samples']} samples "
                   f"({r['current_changes']} current changes) -> {r['seconds']:.0f} s wall "

@@ -81,8 +81,10 @@ def run(args) -> int:
                     progress=None if args.quiet else default_progress, workers=args.workers)
     out = diag.to_json()
     if args.write_params:
+        from dataclasses import replace
+
         extended = diag.extended_params()
-        extended = extended.__class__(**{**extended.__dict__, "provenance": {
+        extended = replace(extended, provenance={
             **dict(extended.provenance),
             "diagnosed_by": "battery-predictor diagnose",
             "diagnosed_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
@@ -91,7 +93,7 @@ def run(args) -> int:
             "reference": [str(p) for p in args.reference],
             "data": [str(p) for p in args.data],
             "started_from": str(args.params),
-        }})
+        })
         out["params_written"] = str(extended.to_yaml(args.write_params))
     if args.report:
         from battery_predictor.diagnosis.report import write_report

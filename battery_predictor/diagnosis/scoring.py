@@ -134,7 +134,7 @@ def noise_level_v(obs_list: list[Observed]) -> float:
     """Measurement noise of the voltage (V): robust spread of second differences at constant current.
 
     Second differences ``v[k+1] - 2 v[k] + v[k-1]`` over three samples of the same current remove
-    the slow drift of the state of charge; their median absolute deviation (x 1.4826 / sqrt(6)) is
+    the slow drift of the state of charge; their standard deviation without outliers (/ sqrt(6)) is
     the noise. At least the quantisation noise of the recorded resolution (step / sqrt(12)).
     """
     d2s, steps = [], []
@@ -152,6 +152,9 @@ def noise_level_v(obs_list: list[Observed]) -> float:
     sigma = 0.0
     if d2s:
         d = np.concatenate(d2s)
-        sigma = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(6.0)
+        for _ in range(3):  # standard deviation without the outliers (steps, spikes); the MAD of
+            spread = float(np.std(d))  # voltages rounded to 10 mV is itself quantised
+            d = d[np.abs(d - np.mean(d)) <= 4.0 * spread] if spread > 0 else d
+        sigma = float(np.std(d)) / math.sqrt(6.0)
     quant = (min(steps) / math.sqrt(12.0)) if steps else 0.0
     return max(sigma, quant)
