@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import brentq
@@ -115,8 +115,7 @@ def calibrate_soc(runner: PackRunner, voltage_v: float, current_a: float, temper
     if run is None or run.final_state is None or clipped:
         return Calibration(soc, res, clipped)
     # the settle's end stands for "now": continue from its state (charge of the settle not counted)
-    state = run.final_state
-    state = type(state)(state.solution, state.base_inputs, soc, 0.0)
+    state = replace(run.final_state, soc_start=soc, charge_ah=0.0)  # keeps every group's solution
     return Calibration(soc, res, clipped, state)
 
 

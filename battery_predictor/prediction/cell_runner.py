@@ -7,6 +7,15 @@ identical cells is then simulated as in the fast simulator: the cell carries
 Piecewise-constant loads are solved segment by segment, continuing from the
 previous segment's state (``Simulation.step``), so answering a route request
 costs a few milliseconds.
+
+With the extension ``cell_imbalance`` the pack holds ``series - 1`` normal groups and one
+weak group, as in the fast simulator: a second model, built for one cell of the weak group
+(electrode height scaled by the weak fraction,
+:func:`~battery_predictor.diagnosis.extensions_impl.weak_group_params`), is stepped with the
+same segments and inputs; the pack voltage is ``(series - 1) * V_normal + V_weak - I_pack * R_eq``
+and the run ends when either group reaches its lower cut-off. Both groups start from the same
+SOC (same stoichiometries; the weak group only holds less charge), so the pack's usable capacity
+and its SOC are those of the group that empties first.
 """
 
 from __future__ import annotations
@@ -26,6 +35,8 @@ _C_N0 = "Initial concentration in negative electrode [mol.m-3]"
 _C_P0 = "Initial concentration in positive electrode [mol.m-3]"
 _T_AMB = "Ambient temperature [K]"
 _T_INIT = "Initial temperature [K]"
+#: Shortest step (s) taken to bring a group to the other group's cut-off time.
+_MIN_STEP_S = 1e-6
 
 
 @dataclass(frozen=True)
@@ -35,19 +46,22 @@ class RunState:
     Attributes
     ----------
     solution : object
-        The PyBaMM solution whose last state is continued.
+        The PyBaMM solution whose last state is continued (the normal cells).
     base_inputs : dict
         The ``[input]`` values the run used (initial concentrations of its start, temperature).
     soc_start : float
         SOC the run started from.
     charge_ah : float
         Net charge drawn since then, Ah (positive = discharge).
+    weak_solution : object or None
+        The weak group's PyBaMM solution at the same time (extension ``cell_imbalance``), else None.
     """
 
     solution: object
     base_inputs: dict
     soc_start: float
     charge_ah: float
+    weak_solution: object | None = None
 
 
 @dataclass(frozen=True)
@@ -81,6 +95,38 @@ class SegmentRun:
     final_state: RunState | None = None
 
 
+def _build_simulation(params):
+    """A built PyBaMM simulation of one cell of ``params`` with current, concentrations and temperature as inputs."""
+    import pybamm
+
+    pv = prepared_parameter_values(params)
+    for key in (_CURRENT, _C_N0, _C_P0, _T_AMB, _T_INIT):
+        pv[key] = "[input]"
+    try:
+        with quiet_pybamm():
+            sim = pybamm.Simulation(build_model(params), parameter_values=pv,
+                                    solver=pybamm.IDAKLUSolver(rtol=1e-6, atol=1e-8))
+            sim.build()
+    except Exception as exc:  # noqa: BLE001 - any build failure is a model failure for the caller
+        raise SimulationError(f"{params.source}: cannot build the pack model: {str(exc).splitlines()[0]}") from None
+    return sim
+
+
+def _step(sim, solution, duration_s: float, inputs: dict, t_interp: np.ndarray):
+    """Step ``sim`` by ``duration_s`` from ``solution``; returns (solution, time_s from the step's start, cell V)."""
+    new = sim.step(duration_s, starting_solution=solution, inputs=inputs, save=False, t_interp=t_interp)
+    time_s = np.asarray(new.t, dtype=float)
+    time_s = time_s - time_s[0]
+    cell_voltage_v = np.asarray(new["Terminal voltage [V]"].entries, dtype=float)
+    return new, time_s, cell_voltage_v
+
+
+def _stopped_early(solution, time_s: np.ndarray, duration_s: float) -> bool:
+    """True when a step ended at the cell's lower cut-off (or otherwise before ``duration_s``)."""
+    return bool(solution.termination and "Minimum voltage" in str(solution.termination)
+                or time_s[-1] < duration_s - 1e-6)
+
+
 class PackRunner:
     """Re-solvable pack model for predictions (thread-safe; one solve at a time).
 
@@ -95,35 +141,39 @@ class PackRunner:
     """
 
     def __init__(self, params, samples_per_segment: int = 4, max_spacing_s: float = 30.0) -> None:
-        import pybamm
+        from dataclasses import replace
+
+        from battery_predictor.diagnosis.extensions_impl import (
+            current_offset_a,
+            weak_group_fraction,
+            weak_group_params,
+        )
 
         self.params = params
         self.samples_per_segment = samples_per_segment
         self.max_spacing_s = max_spacing_s
         self._lock = threading.Lock()
-        pv = prepared_parameter_values(params)
         self._pv_numeric = prepared_parameter_values(params)
-        for key in (_CURRENT, _C_N0, _C_P0, _T_AMB, _T_INIT):
-            pv[key] = "[input]"
-        try:
-            with quiet_pybamm():
-                self._sim = pybamm.Simulation(build_model(params), parameter_values=pv,
-                                              solver=pybamm.IDAKLUSolver(rtol=1e-6, atol=1e-8))
-                self._sim.build()
-        except Exception as exc:  # noqa: BLE001 - any build failure is a model failure for the caller
-            raise SimulationError(f"{params.source}: cannot build the pack model: {str(exc).splitlines()[0]}") from None
+        self._sim = _build_simulation(params)
+        #: extension cell_imbalance: capacity fraction of the weak series group (1 = no weak group)
+        self.weak_fraction = weak_group_fraction(params)
+        #: the weak group's model (one cell of the group), built only with the extension
+        self._weak_sim = None
+        if self.weak_fraction != 1.0:
+            self._weak_sim = _build_simulation(replace(weak_group_params(params), series=1))
         p = params.interconnect
         self.r_eq_ohm = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
                                                           p["r_t_ohm"])
-        from battery_predictor.diagnosis.extensions_impl import current_offset_a
-
         #: extension current_offset: currents given to run() are sensor readings; the cells carry reading - offset
         self.current_offset_a = current_offset_a(params)
 
     # ------------------------------------------------------------------ state
     @cached_property
     def stoichiometry_window(self) -> tuple[float, float, float, float]:
-        """(x_0%, x_100%, y_100%, y_0%): electrode stoichiometries at 0 % and 100 % SOC."""
+        """(x_0%, x_100%, y_100%, y_0%): electrode stoichiometries at 0 % and 100 % SOC.
+
+        The weak group of ``cell_imbalance`` only has a smaller electrode area, so it shares them.
+        """
         import pybamm
 
         try:
@@ -149,14 +199,19 @@ class PackRunner:
 
     @cached_property
     def capacity_ah(self) -> float:
-        """Pack capacity between 0 % and 100 % SOC in Ah (from the negative electrode window)."""
+        """Usable pack capacity between 0 % and 100 % SOC in Ah (from the negative electrode window).
+
+        With ``cell_imbalance`` the group that empties first (the weak group when its fraction
+        is below 1) limits it: ``min(1, weak_fraction)`` x the normal groups' capacity.
+        """
         pv = self._pv_numeric
         x0, x100, _, _ = self.stoichiometry_window
         f = 96485.33212
         volume = (pv["Negative electrode thickness [m]"] * pv["Electrode height [m]"] * pv["Electrode width [m]"]
                   * pv["Negative electrode active material volume fraction"])
-        return float(abs(x100 - x0) * pv["Maximum concentration in negative electrode [mol.m-3]"] * volume * f
-                     / 3600.0 * self.params.parallel)
+        normal_ah = float(abs(x100 - x0) * pv["Maximum concentration in negative electrode [mol.m-3]"] * volume * f
+                          / 3600.0 * self.params.parallel)
+        return normal_ah * min(1.0, self.weak_fraction)
 
     def concentrations(self, soc: float) -> tuple[float, float]:
         """Initial electrode concentrations (mol/m3) at ``soc`` (linear in stoichiometry, as PyBaMM)."""
@@ -169,8 +224,9 @@ class PackRunner:
     def run(self, start: float | RunState, segments, temperature_k: float) -> SegmentRun:
         """Run ``segments`` = [(duration_s, pack_current_a), ...] at ``temperature_k``.
 
-        ``start`` is a SOC (uniform, relaxed particles) or a :class:`RunState` to continue from.
-        Stops early when a cell reaches its lower cut-off.
+        ``start`` is a SOC (uniform, relaxed particles; with ``cell_imbalance`` both groups at
+        that SOC) or a :class:`RunState` to continue from. Stops early when a cell reaches its
+        lower cut-off (with ``cell_imbalance``: a cell of either group).
         """
         import pybamm
 
@@ -178,8 +234,13 @@ class PackRunner:
 
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
             raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
+        weak_sim = self._weak_sim
         if isinstance(start, RunState):
             sol, soc_start, charge0 = start.solution, start.soc_start, start.charge_ah
+            sol_w = start.weak_solution
+            if weak_sim is not None and sol is not None and sol_w is None:
+                raise SimulationError("the state to continue from has no weak-group solution "
+                                      "(made by a runner without cell_imbalance?)")
             base = dict(start.base_inputs)
             base[_T_AMB] = float(temperature_k)
         else:
@@ -189,7 +250,9 @@ class PackRunner:
                 raise SimulationError(f"SOC must be within {lo:.3f}..{hi:.3f} for this model, got {soc}")
             c_n0, c_p0 = self.concentrations(soc)
             base = {_C_N0: c_n0, _C_P0: c_p0, _T_AMB: float(temperature_k), _T_INIT: float(temperature_k)}
-            sol, soc_start, charge0 = None, soc, 0.0
+            sol, sol_w, soc_start, charge0 = None, None, soc, 0.0
+        series = self.params.series
+        r_factor = float(series_resistance_factor(self.params, temperature_k))
         times, volts, amps, ends = [], [], [], []
         t0, cutoff, charge_as = 0.0, False, 0.0
         with self._lock, quiet_pybamm():
@@ -201,41 +264,77 @@ class PackRunner:
                 inputs[_CURRENT] = (current_a - self.current_offset_a) / self.params.parallel
                 n = max(self.samples_per_segment, int(np.ceil(duration_s / self.max_spacing_s)))
                 t_interp = np.linspace(0.0, duration_s, n + 1)
+                new_w = None
                 try:
-                    new = self._sim.step(duration_s, starting_solution=sol, inputs=inputs, save=False,
-                                         t_interp=t_interp)
+                    new, t_seg, v_cell = _step(self._sim, sol, duration_s, inputs, t_interp)
+                    stopped = _stopped_early(new, t_seg, duration_s)
+                    if weak_sim is not None:
+                        new_w, t_w, v_w = _step(weak_sim, sol_w, duration_s, inputs, t_interp)
+                        stopped = stopped or _stopped_early(new_w, t_w, duration_s)
                 except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError) as exc:
                     self._sim._solution = None
+                    if weak_sim is not None:
+                        weak_sim._solution = None
                     if "Minimum voltage" in str(exc) and "initial conditions" in str(exc):
                         cutoff = True  # already at the cut-off under this segment's current
                         break
                     raise SimulationError(f"pack model failed: {str(exc).splitlines()[0]}") from None
-                seg = new
-                t_seg = np.asarray(seg.t, dtype=float)
-                t_seg = t_seg - t_seg[0]
-                v_cell = np.asarray(seg["Terminal voltage [V]"].entries, dtype=float)
+                if weak_sim is None:
+                    v_pack = series * v_cell
+                else:  # extension cell_imbalance: the group that reached its cut-off first ends the segment
+                    if t_w[-1] < t_seg[-1]:
+                        v_cell = np.interp(t_w, t_seg, v_cell)
+                        t_seg = t_w
+                        new = self._truncated(self._sim, sol, new, float(t_w[-1]), inputs)
+                    else:
+                        v_w = np.interp(t_seg, t_w, v_w)
+                        if t_seg[-1] < t_w[-1]:
+                            new_w = self._truncated(weak_sim, sol_w, new_w, float(t_seg[-1]), inputs)
+                    v_pack = (series - 1) * v_cell + v_w
                 times.append(t0 + t_seg)
-                volts.append(self.params.series * v_cell - (current_a - self.current_offset_a) * self.r_eq_ohm
-                             * float(series_resistance_factor(self.params, temperature_k)))
+                volts.append(v_pack - (current_a - self.current_offset_a) * self.r_eq_ohm * r_factor)
                 amps.append(np.full(t_seg.size, current_a))
                 ends.append(sum(len(x) for x in times) - 1)
                 t0 += float(t_seg[-1])
                 charge_as += float(t_seg[-1]) * current_a
-                sol = new
-                if new.termination and "Minimum voltage" in str(new.termination) or t_seg[-1] < duration_s - 1e-6:
+                sol, sol_w = new, new_w
+                if stopped:
                     cutoff = True
                     ends.pop()
                     break
             self._sim._solution = None
-        final = None if sol is None else RunState(sol, base, soc_start, charge0 + charge_as / 3600.0)
+            if weak_sim is not None:
+                weak_sim._solution = None
+        final = None if sol is None else RunState(sol, base, soc_start, charge0 + charge_as / 3600.0, sol_w)
         if not times:  # cut-off before the first segment could start
             return SegmentRun(np.zeros(1), np.full(1, np.nan), np.zeros(1), [], True, 0.0, None)
         return SegmentRun(time_s=np.concatenate(times), pack_voltage_v=np.concatenate(volts),
                           pack_current_a=np.concatenate(amps), segment_end_index=ends, reached_cutoff=cutoff,
                           end_time_s=t0, final_state=final)
 
+    @staticmethod
+    def _truncated(sim, start_solution, longer_solution, duration_s: float, inputs: dict):
+        """``sim``'s state ``duration_s`` after ``start_solution`` (the other group's cut-off time).
+
+        Re-steps the group that ran past the other's cut-off, so that both solutions of the
+        final state describe the same time; keeps ``longer_solution`` when that fails.
+        """
+        import pybamm
+
+        if duration_s <= _MIN_STEP_S:
+            return start_solution if start_solution is not None else longer_solution
+        try:
+            new, _, _ = _step(sim, start_solution, duration_s, inputs, np.array([0.0, duration_s]))
+        except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError):
+            return longer_solution
+        return new
+
     def soc_of(self, state: RunState) -> float:
-        """SOC of a continued state (start SOC minus the charge drawn over the capacity)."""
+        """SOC of a continued state: start SOC minus the charge drawn over :attr:`capacity_ah`.
+
+        With ``cell_imbalance`` this is the SOC of the group that limits the pack (the weak
+        group when its fraction is below 1), as both groups start at the same SOC.
+        """
         return state.soc_start - state.charge_ah / self.capacity_ah
 
     def settled_voltage_v(self, soc: float, current_a: float, temperature_k: float, settle_s: float = 60.0) -> float:

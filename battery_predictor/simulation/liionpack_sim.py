@@ -5,6 +5,9 @@ liionpack steps all cells at a fixed period, re-solving the pack netlist
 The simulation terminates when any cell reaches the cell-level lower cut-off.
 Note: liionpack 0.4.0 uses R_i only as the first step's guess and replaces it by
 ``(OCV - V) / I`` of each cell model at every step.
+With the extension ``temperature`` the interconnect resistances (R_b, R_c, R_t) carry the
+Arrhenius factor of the pack's series resistance at the request's temperature
+(:func:`interconnect_resistance_factor`), as the fast simulator's ``R_eq`` does.
 """
 
 from __future__ import annotations
@@ -32,6 +35,23 @@ RENAMED_INPUT_PREFIX = "Per-cell "
 def liionpack_input_name(key: str) -> str:
     """Name under which a per-cell PyBaMM parameter is passed to liionpack (see above)."""
     return key if key > CURRENT_INPUT else RENAMED_INPUT_PREFIX + key
+
+
+def interconnect_resistance_factor(params, temperature_k: float) -> float:
+    """Factor (-) on the netlist's interconnect resistances ``R_b``, ``R_c``, ``R_t`` at ``temperature_k`` (K).
+
+    The extension ``temperature`` makes the pack's series resistance follow an Arrhenius law
+    (:func:`~battery_predictor.diagnosis.extensions_impl.series_resistance_factor`); the fast
+    simulator and the predictor's runner scale the reduced ``R_eq`` by it, so here every
+    resistance ``R_eq`` is reduced from is scaled (``R_eq`` is, to second order, proportional to
+    them). It is taken at the request's temperature, which is the cells' temperature in the
+    isothermal model; with self-heating (``Total heat transfer coefficient`` fitted, lumped
+    thermal model) the netlist keeps the ambient value while the fast simulator follows the
+    cells' temperature. 1 without the extension.
+    """
+    from battery_predictor.diagnosis.extensions_impl import series_resistance_factor
+
+    return float(series_resistance_factor(params, float(temperature_k)))
 
 
 class LiionpackSimulator:
@@ -88,9 +108,10 @@ class LiionpackSimulator:
                 inputs[name] = arr
             inputs = dict(sorted(inputs.items()))
         p = params.interconnect
-        netlist = lp.setup_circuit(Np=params.parallel, Ns=params.series, Rb=p["r_b_ohm"], Rc=p["r_c_ohm"],
-                                   Ri=p["r_i_ohm"], Rt=p["r_t_ohm"], I=float(stepped.current_a[0]),
-                                   V=float(params.cell_lower_cutoff_v + 0.5))
+        r_factor = interconnect_resistance_factor(params, temperature_k)  # extension temperature
+        netlist = lp.setup_circuit(Np=params.parallel, Ns=params.series, Rb=p["r_b_ohm"] * r_factor,
+                                   Rc=p["r_c_ohm"] * r_factor, Ri=p["r_i_ohm"], Rt=p["r_t_ohm"] * r_factor,
+                                   I=float(stepped.current_a[0]), V=float(params.cell_lower_cutoff_v + 0.5))
         t = stepped.start_s
         experiment = pybamm.Experiment(
             [pybamm.step.current(np.column_stack([t, stepped.current_a]), period=period_s)],

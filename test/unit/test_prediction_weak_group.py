@@ -1,0 +1,102 @@
+"""The predictor's runner with the ``cell_imbalance`` extension: a weak series group limits the pack."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from battery_predictor.diagnosis import extensions_impl as ext
+from battery_predictor.params import load_params
+from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, calibrate_soc
+from battery_predictor.prediction.cell_runner import PackRunner
+from battery_predictor.prediction.runtime import predict_remaining_runtime
+from battery_predictor.simulation import SimulationRequest, StepLoad
+from battery_predictor.simulation.fast import FastPackSimulator
+
+PARAMS = Path(__file__).resolve().parents[2] / "params"
+WEAK_FRACTION = 0.8
+
+
+@pytest.fixture(scope="module")
+def temi():
+    return load_params(PARAMS / "temi.yaml")
+
+
+@pytest.fixture(scope="module")
+def weak_params(temi):
+    return replace(temi, extensions=("cell_imbalance",), extra={ext.WEAK_FRACTION: WEAK_FRACTION})
+
+
+@pytest.fixture(scope="module")
+def runners(temi, weak_params):
+    """(plain runner, runner with a weak group)."""
+    return PackRunner(temi), PackRunner(weak_params)
+
+
+def test_weak_group_shortens_the_runtime_by_about_its_capacity_fraction(runners):
+    plain, weak = runners
+    assert weak.capacity_ah == pytest.approx(WEAK_FRACTION * plain.capacity_ah, rel=1e-9)
+    assert weak.soc_bounds == pytest.approx(plain.soc_bounds)  # same stoichiometries, less area
+    cal = Calibration(soc=0.9, residual_v=0.0)
+    # a pack cut-off below series x the cell cut-off: the first cell at its cut-off ends the run
+    kwargs = dict(voltage_v=15.5, current_a=3.0, temperature_k=298.15, average_current_a=3.0,
+                  cutoff_voltage_v=10.0, calibration=cal)
+    runtime_plain = predict_remaining_runtime(plain, **kwargs)
+    runtime_weak = predict_remaining_runtime(weak, **kwargs)
+    assert runtime_plain.limited_by == runtime_weak.limited_by == "cell_cutoff"
+    assert runtime_weak.remaining_s / runtime_plain.remaining_s == pytest.approx(WEAK_FRACTION, abs=0.03)
+    # at the robot's pack cut-off the weak group's knee still ends the run earlier
+    at_13v3 = {**kwargs, "cutoff_voltage_v": 13.30}
+    ratio = (predict_remaining_runtime(weak, **at_13v3).remaining_s
+             / predict_remaining_runtime(plain, **at_13v3).remaining_s)
+    assert WEAK_FRACTION - 0.03 < ratio < 0.97
+
+
+def test_weak_group_runtime_matches_the_fast_simulator(weak_params, runners):
+    _, weak = runners
+    res = FastPackSimulator().simulate(weak_params, SimulationRequest(load=StepLoad.constant(7.0, 4 * 3600.0),
+                                                                      initial_soc=0.9))
+    assert res.termination == "cell_cutoff"
+    run = weak.run(0.9, [(4 * 3600.0, 7.0)], 298.15)
+    assert run.reached_cutoff
+    assert run.end_time_s == pytest.approx(res.end_time_s, rel=2e-3)
+
+
+def test_continued_state_carries_both_groups(runners):
+    _, weak = runners
+    segs = [(600.0, 3.0), (300.0, 9.0), (900.0, 1.5)]
+    whole = weak.run(0.7, segs, 298.15)
+    first = weak.run(0.7, segs[:2], 298.15)
+    assert first.final_state.weak_solution is not None
+    rest = weak.run(first.final_state, segs[2:], 298.15)
+    assert rest.pack_voltage_v[-1] == pytest.approx(whole.pack_voltage_v[-1], abs=1e-6)
+    # the reported SOC is the limiting (weak) group's: it falls by charge / usable capacity
+    charge_ah = sum(d * i for d, i in segs) / 3600.0
+    assert weak.soc_of(rest.final_state) == pytest.approx(0.7 - charge_ah / weak.capacity_ah)
+    stripped = replace(first.final_state, weak_solution=None)
+    with pytest.raises(Exception, match="weak-group"):
+        weak.run(stripped, segs[2:], 298.15)
+
+
+def test_calibrations_keep_the_weak_group_and_predict_the_simulated_runtime(weak_params, runners):
+    _, weak = runners
+    # truth: constant 2.5 A from SOC 0.5 (both groups) until 13.30 V; the history covers the first 10 min
+    res = FastPackSimulator().simulate(weak_params, SimulationRequest(load=StepLoad.constant(2.5, 10 * 3600.0),
+                                                                      initial_soc=0.5))
+    t_true_s = res.time_to_pack_voltage_s(13.30)
+    t_now_s = 600.0
+    t_hist = np.arange(0.0, t_now_s + 1.0, 5.0)
+    v_hist = np.interp(t_hist + 0.002, res.time_s, res.pack_voltage_v)
+    hist = calibrate_on_history(weak, t_hist, v_hist, np.full(t_hist.size, 2.5), 298.15)
+    assert hist.state is not None and hist.state.weak_solution is not None
+    assert hist.soc == pytest.approx(0.5 - 2.5 * t_now_s / 3600.0 / weak.capacity_ah, abs=2e-3)
+    pred = predict_remaining_runtime(weak, float(v_hist[-1]), 2.5, 298.15, 2.5, 13.30, calibration=hist)
+    assert pred.remaining_s == pytest.approx(t_true_s - t_now_s, rel=0.01)
+    single = calibrate_soc(weak, float(v_hist[-1]), 2.5, 298.15)
+    assert single.state is not None and single.state.weak_solution is not None
+    from_state = predict_remaining_runtime(weak, float(v_hist[-1]), 2.5, 298.15, 2.5, 13.30, calibration=single)
+    # the single sample assumes relaxed particles: about -2.5 %, as much as on the plain pack
+    assert from_state.remaining_s == pytest.approx(t_true_s - t_now_s, rel=0.04)
