@@ -2,8 +2,13 @@
 
 Studies live in an Optuna RDB storage (SQLite file by default, any Optuna storage
 URL such as PostgreSQL otherwise), so several processes can work on one study and
-a stopped fit resumes where it stopped. A failing simulation is recorded as a
-failed trial and never stops the fit.
+a stopped fit resumes where it stopped. A failing simulation (a solver
+failure, or a parameter combination whose initial state lies outside the cell's voltage
+window) never stops the fit: it is recorded as a *pruned* trial carrying the error in its
+``error`` user attribute. Pruned rather than failed, because Optuna's TPE ignores failed
+trials but ranks pruned ones below every completed trial: the sampler learns to avoid
+infeasible regions instead of proposing them again (with Table 1 start values, 40 % of the
+trials of a Chen2020 fit were infeasible and the fit did not converge).
 """
 
 from __future__ import annotations
@@ -68,14 +73,16 @@ def study_name_for(problem: FitProblem, space: Sequence[FitParameter]) -> str:
 def _objective_factory(problem: FitProblem, space: Sequence[FitParameter]):
     def objective(trial) -> float:
         values = {p.name: trial.suggest_float(p.name, p.low, p.high, log=p.log) for p in space}
+        import optuna
+
         try:
             ev = problem.evaluate(values)
         except BatteryPredictorError as exc:
             trial.set_user_attr("error", str(exc)[:300])
-            raise SimulationError(str(exc)) from None
+            raise optuna.TrialPruned(str(exc)[:300]) from None
         if not math.isfinite(ev.r2_mod):
             trial.set_user_attr("error", "non-finite R2_mod")
-            raise SimulationError("non-finite R2_mod")
+            raise optuna.TrialPruned("non-finite R2_mod")
         trial.set_user_attr("rmse_mv", [float(x) for x in ev.rmse_mv])
         return ev.r2_mod
 
@@ -93,7 +100,7 @@ def _worker(storage: str, study_name: str, problem: FitProblem, space, seed: int
     study = optuna.load_study(study_name=study_name, storage=storage, sampler=sampler)
 
     def stop_when_done(study, _trial) -> None:
-        states = (TrialState.COMPLETE, TrialState.FAIL)
+        states = (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED)
         if len(study.get_trials(deepcopy=False, states=states)) >= n_trials_total:
             study.stop()
 
@@ -150,7 +157,7 @@ class TPEOptimiser:
                                         direction="maximize", load_if_exists=True)
         except Exception as exc:  # storage URL unreachable, bad scheme...
             raise BatteryPredictorError(f"cannot open Optuna storage {self.storage!r}: {exc}") from None
-        finished_states = (TrialState.COMPLETE, TrialState.FAIL)
+        finished_states = (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED)
         done = len(study.get_trials(deepcopy=False, states=finished_states))
         if done == 0 and not study.get_trials(deepcopy=False):
             study.enqueue_trial({p.name: min(max(p.initial, p.low), p.high) for p in space})
@@ -195,7 +202,7 @@ class TPEOptimiser:
                     bar.close()
         trials = study.get_trials(deepcopy=False)
         complete = [t for t in trials if t.state == TrialState.COMPLETE]
-        failed = [t for t in trials if t.state == TrialState.FAIL]
+        failed = [t for t in trials if t.state in (TrialState.FAIL, TrialState.PRUNED)]
         if not complete:
             reasons = {t.user_attrs.get("error", "?") for t in failed[:5]}
             raise SimulationError(f"every trial failed ({len(failed)}); e.g. {'; '.join(sorted(reasons))}")

@@ -73,6 +73,37 @@ def test_failing_simulations_are_failed_trials_and_do_not_stop_the_fit(temi_para
     assert result.best_values["Electrode height [m]"] <= 1.0
 
 
+def test_failing_trials_are_pruned_with_their_error_so_tpe_ranks_them_last(temi_params, tmp_path):
+    import optuna
+    from optuna.trial import TrialState
+
+    storage = f"sqlite:///{tmp_path / 'fit.db'}"
+    problem = _linear_problem(temi_params, fail_above=1.0)
+    space = fit_space(temi_params, ("Electrode height [m]",))
+    result = TPEOptimiser(n_trials=30, seed=0, storage=storage, progress=False).run(problem, space)
+    trials = optuna.load_study(study_name=result.study_name, storage=storage).trials
+    pruned = [t for t in trials if t.state == TrialState.PRUNED]
+    assert len(pruned) == result.failed_trials > 0
+    assert all(t.user_attrs["error"] == "solver failed (test)" for t in pruned)
+    assert all(t.params["Electrode height [m]"] > 1.0 for t in pruned)
+
+
+def test_initial_concentration_bounds_stay_below_the_electrode_maximum(temi_params):
+    from dataclasses import replace
+
+    table1 = replace(temi_params, fitted={})  # Chen2020 values: 29866 of 33133 mol/m3 in the negative electrode
+    names = ("Initial concentration in negative electrode [mol.m-3]",
+             "Initial concentration in positive electrode [mol.m-3]",
+             "Maximum concentration in positive electrode [mol.m-3]")
+    space = {p.name: p for p in fit_space(table1, names)}
+    neg = space[names[0]]
+    c_n_max = table1.value("Maximum concentration in negative electrode [mol.m-3]")
+    assert neg.low == pytest.approx(0.5 * neg.initial) and neg.high == pytest.approx(0.99 * c_n_max)
+    pos, pos_max = space[names[1]], space[names[2]]
+    assert pos.high <= 0.99 * pos_max.low  # feasible for every maximum searched
+    assert pos.low >= 0.01 * pos_max.high
+
+
 def test_every_trial_failing_gives_a_clear_error(temi_params):
     problem = _linear_problem(temi_params, fail_above=0.0)
     space = fit_space(temi_params, ("Electrode height [m]",))
