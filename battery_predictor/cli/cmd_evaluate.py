@@ -71,7 +71,9 @@ def run(args) -> int:
         if not args.json:
             print(msg, flush=True)
 
-    summary: dict = {"paper": {k: v for k, v in PAPER.items() if k != "table2"}}
+    summary: dict = {"paper": {k: v for k, v in PAPER.items() if k != "table2"},
+                     "settings": {"trials per fit": args.trials, "seed": args.seed,
+                                  "base sets": " ".join(args.base_sets), "skipped": " ".join(args.skip) or "none"}}
     figures: dict = {}
     temi = load_params(args.temi_params)
     dyn = [trim_to_discharge(load_recording(f)) for f in dyn_files] if need_temi else []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -11,6 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from battery_predictor.evaluation.paper_eval import PAPER  # noqa: E402
+from battery_predictor.jsonutil import json_default  # noqa: E402
 
 
 def _fmt(x, nd=2) -> str:
@@ -108,6 +110,9 @@ def write_markdown(out_dir: Path, summary: dict, figures: dict[str, Path]) -> Pa
     lines = ["# Evaluation as in the seed paper (section 5)", "",
              "All recordings are the bundled **emulated** ones unless other files were given "
              "(see `bags/README.md`).", ""]
+    settings = summary.get("settings")
+    if settings:
+        lines += ["Settings: " + ", ".join(f"{k} `{v}`" for k, v in settings.items()) + ".", ""]
     if "table2" in summary:
         lines += ["## Information robot: optimisation and validation (Table 2)", "",
                   "| opt. profile | parameter set | opt. R2_mod | val. R2_mod | paper opt. | paper val. |",
@@ -154,4 +159,5 @@ def write_markdown(out_dir: Path, summary: dict, figures: dict[str, Path]) -> Pa
             lines += [f"![{title}]({path.name})", ""]
     out = out_dir / "report.md"
     out.write_text("\n".join(lines))
+    (out_dir / "summary.json").write_text(json.dumps(summary, default=json_default, indent=1, allow_nan=True))
     return out
