@@ -21,7 +21,11 @@ def register(sub) -> None:
                    help="information robot dynamic discharges (first = fit data); default: bundled temi_dynamic_*")
     p.add_argument("--temi-static", default=None, help="information robot static discharge")
     p.add_argument("--ranger-stepwise", default=None, help="luggage robot stepwise experiment")
-    p.add_argument("--ranger-routes", nargs="+", default=None, help="luggage robot route bags (with truth metadata)")
+    p.add_argument("--ranger-routes", nargs="+", default=None,
+                   help="luggage robot recordings of repeated longest routes (bags or CSVs); default: bundled")
+    p.add_argument("--route-payload-kg", nargs="+", type=float, default=None,
+                   help="payload of each --ranger-routes recording (kg), for recordings without route metadata; "
+                        "the truth is then measured in the recording itself")
     p.add_argument("--base-sets", nargs="+", default=list(BASE_SETS), help="PyBaMM sets compared in Table 2")
     p.add_argument("--trials", type=int, default=300, help="TPE trials per fit (paper: 1000)")
     p.add_argument("--seed", type=int, default=0)
@@ -113,7 +117,7 @@ def run(args) -> int:
             ranger = dataclasses.replace(ranger, source=str(out / "ranger_fit_stepwise.yaml"))
             ranger.to_yaml(out / "ranger_fit_stepwise.yaml")
         log(f"route evaluation on {len(route_files)} recording(s) ...")
-        cases = route_evaluation(ranger, [load_recording(f) for f in route_files])
+        cases = route_evaluation(ranger, [load_recording(f) for f in route_files], args.route_payload_kg)
         summary["routes"] = route_summary(cases)
         summary["route_cases"] = [dataclasses.asdict(c) for c in cases]
         figures["Fig. 8 kind: routes"] = report.fig_routes(cases, float(ranger.thresholds["route_min_voltage_v"]),

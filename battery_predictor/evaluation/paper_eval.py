@@ -182,11 +182,49 @@ class RouteCase:
     predicted_v: tuple[float, float]
     actual_v: tuple[float, float]
     decisions: tuple[bool, bool, bool]
-    truth: tuple[bool, bool, bool]
+    truth: tuple[bool | None, bool | None, bool | None]  # None: not known from the recording
     reasons: tuple[str, str, str]
 
 
-def route_evaluation(params: PackParams, recs: Sequence[Recording]) -> list[RouteCase]:
+def route_truth_from_recording(rec: Recording, payload_kg: float, params: PackParams) -> dict:
+    """The route ground truth measured in a recording of repeated longest routes (no metadata needed).
+
+    The recording must start at the beginning of a longest-route cycle of ``payload_kg``
+    (:func:`~battery_predictor.profiles.ranger.longest_route`: standstill, loaded leg, empty
+    return, standstill), repeated back to back, as in the paper's 5.2.4. The voltage "at 1.70 A
+    after cycle k" is the mean over the final standstill of cycle k; whether a further cycle
+    stays above the threshold is known only when a third cycle was recorded (else None).
+
+    Raises
+    ------
+    InputDataError
+        When the recording does not cover two cycles.
+    """
+    from battery_predictor.lab.experiments import standstill_voltage_v
+    from battery_predictor.profiles.ranger import longest_route
+
+    route = longest_route(float(payload_kg))
+    period = float(route.duration_s)
+    standstill = float(route.sections[-1].standstill_s) or float(route.sections[0].standstill_s)
+    threshold = float(params.thresholds["route_min_voltage_v"])
+    t = rec.relative_time_s
+    if t[-1] < 2 * period - standstill:
+        raise InputDataError(f"{rec.source}: {t[-1]:.0f} s recorded, two longest-route cycles of "
+                             f"{payload_kg:g} kg take {2 * period:.0f} s")
+    try:
+        after = [standstill_voltage_v(t, rec.voltage_v, period * k, standstill) for k in (1, 2)]
+    except BatteryPredictorError as exc:
+        raise InputDataError(f"{rec.source}: {exc}") from None
+    third = (t >= 2 * period - 1e-6) & (t <= 3 * period + 1e-6)
+    further = None
+    if t[-1] >= 3 * period - 5.0 and third.any():
+        further = bool(float(np.min(rec.voltage_v[third])) >= threshold)
+    return {"cycle_duration_s": period, "standstill_s": standstill, "voltage_at_1_70_a_after_cycle_v": after,
+            "further_cycle_stays_above_threshold": further, "threshold_v": threshold, "derived_from": "recording"}
+
+
+def route_evaluation(params: PackParams, recs: Sequence[Recording],
+                     payloads_kg: Sequence[float | None] | None = None) -> list[RouteCase]:
     """Predicted vs recorded voltage at the standstill current after each of the two cycles.
 
     The prediction starts from the state calibrated (as the predictor node does) at the end of
@@ -194,6 +232,10 @@ def route_evaluation(params: PackParams, recs: Sequence[Recording]) -> list[Rout
     (payload, slope), as the paper does; decisions are asked of :class:`PredictorCore` at the
     start, after cycle 1 and after cycle 2 (each for one more longest route) and compared with
     the recorded truth.
+
+    The truth comes from the recording's metadata (bundled bags), else it is measured in the
+    recording itself (:func:`route_truth_from_recording`) for the payload given in
+    ``payloads_kg`` (one per recording, None = from the metadata).
     """
     from battery_predictor.prediction.core import PredictorConfig, PredictorCore
     from battery_predictor.prediction.route import route_segments
@@ -203,13 +245,21 @@ def route_evaluation(params: PackParams, recs: Sequence[Recording]) -> list[Rout
     runner = template.runner
     threshold = float(params.thresholds["route_min_voltage_v"])
     i_stand = float(params.thresholds["standstill_current_a"])
+    payloads = list(payloads_kg) if payloads_kg is not None else [None] * len(recs)
+    if len(payloads) != len(recs):
+        raise InputDataError(f"{len(payloads)} payload(s) given for {len(recs)} route recording(s)")
     cases = []
-    for rec in recs:
+    for rec, payload_given in zip(recs, payloads, strict=True):
         meta = rec.metadata if isinstance(rec.metadata, dict) else {}
         truth, route_meta = meta.get("truth"), meta.get("route")
-        if not isinstance(truth, dict) or not isinstance(route_meta, dict):
-            raise InputDataError(f"{rec.source}: no route ground truth in the bag metadata")
-        payload = float(route_meta["payload_kg"])
+        if payload_given is not None:
+            payload = float(payload_given)
+        elif isinstance(route_meta, dict) and "payload_kg" in route_meta:
+            payload = float(route_meta["payload_kg"])
+        else:
+            raise InputDataError(f"{rec.source}: no payload in the metadata; give it (--route-payload-kg)")
+        if not isinstance(truth, dict) or "voltage_at_1_70_a_after_cycle_v" not in truth:
+            truth = route_truth_from_recording(rec, payload, params)
         period = float(truth["cycle_duration_s"])
         standstill = float(truth["standstill_s"])
         sections = longest_route(payload).sections
@@ -236,7 +286,8 @@ def route_evaluation(params: PackParams, recs: Sequence[Recording]) -> list[Rout
             d = core.can_accept_route(sections, now)
             decisions.append(bool(d.accepted))
             reasons.append(d.reason)
-        truth_dec = (actual[0] >= threshold, actual[1] >= threshold, bool(truth["further_cycle_stays_above_threshold"]))
+        further = truth.get("further_cycle_stays_above_threshold")
+        truth_dec = (actual[0] >= threshold, actual[1] >= threshold, None if further is None else bool(further))
         cases.append(RouteCase(str(rec.source), payload, pred, actual, tuple(decisions), truth_dec, tuple(reasons)))
     return cases
 
@@ -275,9 +326,10 @@ def route_summary(cases: Sequence[RouteCase]) -> dict:
             if math.isfinite(p) and math.isfinite(a):
                 errs[k].append((abs(p - a), 100.0 * abs(p - a) / a))
     allv = errs[1] + errs[2]
-    n_dec = sum(len(c.decisions) for c in cases)
-    correct = sum(d == t for c in cases for d, t in zip(c.decisions, c.truth))
-    unsafe = sum(d and not t for c in cases for d, t in zip(c.decisions, c.truth))
+    known = [(d, t) for c in cases for d, t in zip(c.decisions, c.truth, strict=True) if t is not None]
+    n_dec = len(known)
+    correct = sum(d == t for d, t in known)
+    unsafe = sum(d and not t for d, t in known)
     return {
         "mae_v": float(np.mean([e[0] for e in allv])) if allv else math.nan,
         "mape_pct": float(np.mean([e[1] for e in allv])) if allv else math.nan,

@@ -60,3 +60,48 @@ def test_missing_bags_directory_is_a_one_line_error(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert "no information-robot recordings" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_route_truth_measured_in_the_recording_matches_the_bundled_metadata():
+    from battery_predictor.evaluation.paper_eval import route_truth_from_recording
+    from battery_predictor.io.loader import load_recording
+    from battery_predictor.params import load_params
+
+    params = load_params(REPO / "params" / "ranger_mini.yaml")
+    for name in ("ranger_route_20kg_pack1", "ranger_route_80kg_pack2"):
+        rec = load_recording(BAGS / name)
+        meta = rec.metadata["truth"]
+        derived = route_truth_from_recording(rec, rec.metadata["route"]["payload_kg"], params)
+        assert derived["cycle_duration_s"] == pytest.approx(meta["cycle_duration_s"])
+        assert derived["standstill_s"] == pytest.approx(meta["standstill_s"])
+        assert derived["voltage_at_1_70_a_after_cycle_v"] == pytest.approx(meta["voltage_at_1_70_a_after_cycle_v"],
+                                                                           abs=1e-6)  # float32 in the bag
+        assert derived["further_cycle_stays_above_threshold"] is None  # only two cycles recorded
+
+
+def test_route_truth_needs_two_recorded_cycles():
+    from battery_predictor.errors import InputDataError
+    from battery_predictor.evaluation.paper_eval import route_truth_from_recording
+    from battery_predictor.io.loader import load_recording
+    from battery_predictor.params import load_params
+
+    params = load_params(REPO / "params" / "ranger_mini.yaml")
+    rec = load_recording(BAGS / "ranger_route_40kg_pack1")
+    short = rec.slice_time(rec.time_s[0], rec.time_s[0] + 2500.0)
+    with pytest.raises(InputDataError, match="two longest-route cycles"):
+        route_truth_from_recording(short, 40.0, params)
+
+
+@pytest.mark.slow
+def test_route_csv_without_metadata_is_evaluated_with_the_payload_given(tmp_path):
+    from battery_predictor.io.loader import bag_to_csv
+
+    csv = bag_to_csv(BAGS / "ranger_route_60kg_pack3", tmp_path / "route60.csv")
+    no_payload = subprocess.run([CLI, "evaluate", "--skip", "table2", "runtime", "--trials", "2", "--ranger-routes",
+                                 str(csv), "--out", str(tmp_path / "a")], capture_output=True, text=True, timeout=900)
+    assert no_payload.returncode == 2 and "--route-payload-kg" in no_payload.stderr
+    summary, _ = _evaluate(tmp_path, "--skip", "table2", "runtime", "--trials", "2", "--ranger-routes", str(csv),
+                           "--route-payload-kg", "60")
+    case = summary["route_cases"][0]
+    assert case["payload_kg"] == 60.0 and case["truth"][2] is None
+    assert summary["routes"]["decisions"] == 2  # the third decision has no recorded truth
