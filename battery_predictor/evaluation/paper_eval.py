@@ -170,6 +170,10 @@ def runtime_summary(points: Sequence[RuntimePoint]) -> dict:
         }
     out["mae_min"] = float(np.mean([p.abs_error_min for p in valid])) if valid else math.nan
     out["mape_pct"] = float(np.mean([p.abs_pct_error for p in valid])) if valid else math.nan
+    out["bias_min"] = (float(np.mean([(p.predicted_remaining_s - p.actual_remaining_s) / 60.0 for p in valid]))
+                       if valid else math.nan)
+    # MAE scales with the runtimes: the mean actual remaining runtime makes it comparable across data sets
+    out["mean_actual_remaining_min"] = float(np.mean([p.actual_remaining_s / 60.0 for p in valid])) if valid else math.nan
     return out
 
 
