@@ -32,6 +32,11 @@ def register(sub) -> None:
                    help="model evaluations of the reference fit (default 150)")
     p.add_argument("--fit-fraction", type=float, default=0.6,
                    help="fraction (in time) of each observed recording used for fitting; the rest is held out")
+    p.add_argument("--split", choices=("auto", "time", "recordings"), default="auto",
+                   help="hold-out: 'time' fits on the first --fit-fraction of every observed recording; "
+                        "'recordings' fits once per recording on all other recordings whole plus the first "
+                        "--fit-fraction of it, and judges the rest of it; 'auto' (default): 'recordings' when "
+                        "two or more recordings are observed, else 'time'")
     p.add_argument("--causes", nargs="+", choices=EXTENSION_NAMES, default=None,
                    help="candidate causes to try (default all)")
     p.add_argument("--trim", action="store_true",
@@ -78,7 +83,7 @@ def run(args) -> int:
                     budget=args.budget or DEFAULT_BUDGET,
                     reference_budget=args.reference_budget or DEFAULT_REFERENCE_BUDGET,
                     fit_fraction=args.fit_fraction, causes=args.causes, seed=args.seed,
-                    progress=None if args.quiet else default_progress, workers=args.workers)
+                    progress=None if args.quiet else default_progress, workers=args.workers, split=args.split)
     out = diag.to_json()
     if args.write_params:
         from dataclasses import replace

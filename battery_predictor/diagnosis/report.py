@@ -152,9 +152,14 @@ def write_report(diag, out_dir: str | Path, command: str = "") -> Path:
                   + ", ".join(f"{_LABELS[a]} / {_LABELS[b]}" for a, b in diag.residuals.collinear) + "."]
     lines += ["", "![baseline residual against the features](residuals.png)", "",
               "## Candidates", "",
-              f"Each candidate fitted its parameters and the initial SOC on the first {100 * diag.fit_fraction:.0f} % "
-              f"of each recording with {diag.budget} model evaluations, as the baseline did over its initial "
-              "SOC alone; all are scored on the held-out rest.", "",
+              (f"Each candidate fitted its parameters and the initial SOC once per recording (a fold): on every "
+               f"other recording whole and the first {100 * diag.fit_fraction:.0f} % of that recording, with "
+               f"{diag.budget} model evaluations per fold; each fold predicts the held-out rest of its recording. "
+               f"The baseline fitted its initial SOCs alone on the first {100 * diag.fit_fraction:.0f} % of each "
+               "recording. Fitted values are the mean over the folds." if diag.split == "recordings" else
+               f"Each candidate fitted its parameters and the initial SOC on the first {100 * diag.fit_fraction:.0f} % "
+               f"of each recording with {diag.budget} model evaluations, as the baseline did over its initial "
+               "SOC alone; all are scored on the held-out rest."), "",
               "| cause | held-out RMSE (mV) | gain (%) | R2_mod | runtime error (s) | fitted |",
               "|---|---:|---:|---:|---:|---|"]
     for c in [diag.baseline] + list(diag.candidates):

@@ -165,9 +165,22 @@ def _fmt_fitted(fitted: dict[str, float]) -> str:
     return ", ".join(f"{k} = {v:.4g}" for k, v in fitted.items())
 
 
+#: Observed recordings whose mean measured temperature differs from the reference's by more than this (K)
+#: get a caveat when a capacity-like cause is named (see :func:`evidence_text`).
+TEMPERATURE_CAVEAT_K = 5.0
+#: Causes that act as a capacity scale within a discharge.
+CAPACITY_LIKE = ("current_offset", "capacity_fade")
+
+
 def evidence_text(cause: str, base, best, results, analysis: ResidualAnalysis, noise_mv: float,
-                  close: list[str], floor_mv: float | None = None) -> str:
-    """One paragraph: the baseline's error, the residual features that carry it, the verdict."""
+                  close: list[str], floor_mv: float | None = None, temperature_shift_k: float | None = None) -> str:
+    """One paragraph: the baseline's error, the residual features that carry it, the verdict.
+
+    ``temperature_shift_k`` (observed minus reference mean measured temperature): when it exceeds
+    :data:`TEMPERATURE_CAVEAT_K` and the named cause is capacity-like (:data:`CAPACITY_LIKE`), the text
+    says that the held-out comparison cannot tell that cause from a loss of accessible capacity with
+    temperature. The caveat does not change the verdict, which rests on held-out prediction alone.
+    """
     from battery_predictor.diagnosis.candidates import candidate
     from battery_predictor.diagnosis.diagnose import GAIN_THRESHOLD_PCT
 
@@ -209,4 +222,11 @@ def evidence_text(cause: str, base, best, results, analysis: ResidualAnalysis, n
                                                for r in others) + ".")
     if close:
         parts.append(f"Within 10 % of it, hence not clearly separable on these data: {', '.join(close)}.")
+    if (cause in CAPACITY_LIKE and temperature_shift_k is not None
+            and abs(temperature_shift_k) > TEMPERATURE_CAVEAT_K):
+        parts.append(f"Caveat: the observed recordings are {abs(temperature_shift_k):.0f} K "
+                     f"{'colder' if temperature_shift_k < 0 else 'warmer'} than the reference; within a discharge "
+                     f"{cause} acts as a capacity scale and cannot be told from a temperature-driven change of the "
+                     "accessible capacity that the temperature candidate does not model (read it as a capacity-like "
+                     "error, not as evidence of a sensor or ageing fault).")
     return " ".join(parts)
