@@ -132,8 +132,12 @@ def actual_runtime_s(rec: Recording, cutoff_v: float) -> float:
 
 
 def runtime_evaluation(params: PackParams, recs: Sequence[Recording], *, checkpoints_s=CHECKPOINTS_S,
-                       cutoff_v: float | None = None) -> list[RuntimePoint]:
-    """The predictor's strategy after 30, 60, ... min of each recording vs the actual remaining runtime."""
+                       cutoff_v: float | None = None, peak_current_quantile: float = 0.0) -> list[RuntimePoint]:
+    """The predictor's strategy after 30, 60, ... min of each recording vs the actual remaining runtime.
+
+    ``peak_current_quantile`` = 0 is the paper's strategy (average load); > 0 the predictor's
+    load-peak strategy (see :class:`~battery_predictor.prediction.core.PredictorConfig`).
+    """
     from battery_predictor.prediction.core import PredictorConfig, PredictorCore
 
     cutoff = float(cutoff_v if cutoff_v is not None else params.thresholds["runtime_cutoff_voltage_v"])
@@ -141,7 +145,8 @@ def runtime_evaluation(params: PackParams, recs: Sequence[Recording], *, checkpo
     for rec in recs:
         t_true = actual_runtime_s(rec, cutoff)
         core = PredictorCore(PredictorConfig(params_file=params.source, cutoff_voltage_v=cutoff,
-                                             stale_after_s=1e9), params=params)
+                                             stale_after_s=1e9, peak_current_quantile=peak_current_quantile),
+                             params=params)
         t = rec.relative_time_s
         temp = rec.temperature_k if rec.temperature_k is not None else np.full(t.size, math.nan)
         k = 0

@@ -189,6 +189,11 @@ class PredictorNode(Node):
                 self, "recalibrate_after_s", _core_default("recalibrate_after_s"),
                 "Full SOC calibrations at most this far apart, s; in between the calibrated state is carried "
                 "forward with the measured current.", 0.0, 86400.0),
+            peak_current_quantile=declare_float(
+                self, "peak_current_quantile", _core_default("peak_current_quantile"),
+                "Quantile of the present cycle's 5 s currents taken as its recurring load peak: the runtime ends "
+                "when such a peak pulls the pack to the cut-off (0 = under the average load, as the paper).",
+                0.0, 1.0),
             route_currents_file=resolve_params_file(declare_str(
                 self, "route_currents_file", "",
                 "Per-(payload, slope) current samples of the luggage robot; empty = the bundled "

@@ -59,7 +59,11 @@ class PredictorConfig:
         History the SOC calibration simulates (0 = calibrate on the latest sample only, as the paper).
     peak_current_quantile : float
         Quantile of the present cycle's (5 s window) currents taken as its recurring load peak:
-        the cut-off is met under a peak, not under the average (0 = average only, as the paper).
+        the robot stops at the first measured window below the cut-off, which falls on a load peak,
+        not on the average load; the runtime ends when a peak drawn from the average-load
+        trajectory reaches the cut-off (0 = average only, as the paper). Default 0.99 (a load
+        drawn 1 % of the time); on the bundled Temi bags it cut the runtime MAE from 38.4 to
+        23.6 min (docs/evaluation).
     recalibrate_after_s : float
         Between full calibrations (at most this far apart, s) the calibrated state is propagated
         with the measured current (charge counting through the model), which is more reliable
@@ -76,7 +80,7 @@ class PredictorConfig:
     route_currents_file: str = ""
     calibration_window_s: float = 600.0
     recalibrate_after_s: float = 3600.0
-    peak_current_quantile: float = 0.0
+    peak_current_quantile: float = 0.99
 
 
 @dataclass(frozen=True)
@@ -273,7 +277,8 @@ class PredictorCore:
             return RuntimeStatus(stamp, math.nan, avg, temp, math.nan, cutoff, False, STATUS_MODEL_FAILED,
                                  f"model failed: {exc}")
         note = f"; calibration {pred.calibration.clipped}" if pred.calibration.clipped else ""
-        reason = (f"{pred.remaining_s / 60:.1f} min at {avg:.2f} A, {temp - 273.15:.1f} degC until "
+        peaks = f" with {peak:.2f} A peaks" if pred.limited_by == "peak_cutoff" else ""
+        reason = (f"{pred.remaining_s / 60:.1f} min at {avg:.2f} A{peaks}, {temp - 273.15:.1f} degC until "
                   f"{cutoff:.2f} V ({pred.limited_by}){note}")
         return RuntimeStatus(stamp, pred.remaining_s, avg, temp, pred.calibration.soc, cutoff, True, STATUS_OK,
                              reason)

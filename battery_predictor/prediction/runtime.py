@@ -36,7 +36,7 @@ class RuntimePrediction:
     cutoff_voltage_v : float
         Pack voltage threshold in V.
     limited_by : str
-        ``"pack_cutoff"``, ``"cell_cutoff"`` or ``"horizon"``.
+        ``"pack_cutoff"`` (average load), ``"peak_cutoff"`` (a load peak), ``"cell_cutoff"`` or ``"horizon"``.
     """
 
     remaining_s: float
@@ -74,6 +74,52 @@ def peak_voltage_drop_v(runner: PackRunner, start, average_current_a: float, pea
     return max(0.0, float(np.mean(a.pack_voltage_v) - np.mean(b.pack_voltage_v)))
 
 
+def peak_crossing_s(runner: PackRunner, start, average_current_a: float, peak_current_a: float,
+                    temperature_k: float, cutoff_voltage_v: float, average_run, *, settle_s: float = 5.0,
+                    tolerance_s: float = 30.0, max_runs: int = 8) -> float | None:
+    """First time (s) at which a load peak, drawn from the average-load trajectory, pulls the pack to the cut-off.
+
+    ``g(t)`` = mean pack voltage over ``settle_s`` at ``peak_current_a`` after ``t`` s at
+    ``average_current_a``, minus the cut-off; its root is bracketed between 0 and the
+    average-load crossing (where ``g < 0`` since the peak draws more) and found with Brent's
+    method on at most ``max_runs`` model runs (to ``tolerance_s``). The first guess is the
+    average-load trajectory lowered by the peak's extra drop at the present state.
+
+    Returns None when no crossing exists before the end of ``average_run``.
+    """
+    from scipy.optimize import brentq
+
+    def g(t_s: float) -> float:
+        run = runner.run(start, ([(t_s, average_current_a)] if t_s > 1.0 else []) + [(settle_s, peak_current_a)],
+                         temperature_k)
+        if run.reached_cutoff:
+            return -1.0  # a cell reaches its cut-off during the peak: the robot stops here
+        peak_part = run.time_s >= run.time_s[-1] - settle_s + 1e-9
+        return float(np.mean(run.pack_voltage_v[peak_part])) - cutoff_voltage_v
+
+    t_avg = time_to_voltage_s(average_run.time_s, average_run.pack_voltage_v, cutoff_voltage_v)
+    if t_avg is None:
+        t_avg = float(average_run.end_time_s) if average_run.reached_cutoff else None
+    if t_avg is None:
+        return None
+    if g(0.0) <= 0.0:
+        return 0.0
+    drop_v = peak_voltage_drop_v(runner, start, average_current_a, peak_current_a, temperature_k, settle_s)
+    guess = time_to_voltage_s(average_run.time_s, average_run.pack_voltage_v, cutoff_voltage_v + drop_v)
+    lo, hi = 0.0, float(t_avg)
+    if guess is not None and 0.0 < guess < hi:  # tighten the bracket with the first guess
+        if g(guess) > 0.0:
+            lo = guess
+        else:
+            hi = guess
+    if hi - lo <= tolerance_s:
+        return 0.5 * (lo + hi)
+    try:
+        return float(brentq(g, lo, hi, xtol=tolerance_s, maxiter=max_runs))
+    except (ValueError, RuntimeError):  # no sign change (model noise at the bracket) or not converged
+        return lo
+
+
 def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: float, temperature_k: float,
                               average_current_a: float, cutoff_voltage_v: float,
                               calibration: Calibration | None = None,
@@ -94,9 +140,9 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
         An existing calibration of the present state (e.g. on history); else calibrated on the sample.
     peak_current_a : float, optional
         Recurring load peak of the present cycle (A). The robot stops when a *measured* 5 s window
-        reaches the cut-off, which happens at a load peak, not at the average load: the pack
-        voltage under the average current is compared with the cut-off raised by the extra drop
-        the peak causes (from the model at the present state).
+        reaches the cut-off, which happens at a load peak, not at the average load: the runtime is
+        the first time a peak drawn from the average-load trajectory reaches the cut-off
+        (:func:`peak_crossing_s`), not when the average load does (the paper's strategy).
     """
     if not (math.isfinite(average_current_a) and average_current_a > 0):
         raise SimulationError(f"average discharge current must be > 0 A, got {average_current_a}")
@@ -105,10 +151,13 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
         return RuntimePrediction(0.0, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
     charge_left_ah = max(cal.soc - runner.soc_bounds[0], 0.02) * runner.capacity_ah
     horizon_s = min(MAX_HORIZON_S, 1.5 * charge_left_ah * 3600.0 / average_current_a + 3600.0)
-    drop_v = 0.0 if peak_current_a is None else peak_voltage_drop_v(runner, cal.start, average_current_a,
-                                                                     float(peak_current_a), temperature_k)
     run = runner.run(cal.start, [(horizon_s, average_current_a)], temperature_k)
-    t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v + drop_v)
+    if peak_current_a is not None and peak_current_a > average_current_a:
+        t_peak = peak_crossing_s(runner, cal.start, average_current_a, float(peak_current_a), temperature_k,
+                                 cutoff_voltage_v, run)
+        if t_peak is not None:
+            return RuntimePrediction(t_peak, cal, average_current_a, temperature_k, cutoff_voltage_v, "peak_cutoff")
+    t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
     if t_pack is not None:
         return RuntimePrediction(t_pack, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
     if run.reached_cutoff:

@@ -180,3 +180,25 @@ def test_peak_load_option_shortens_the_predicted_runtime():
             core.update_state(10.0 * k, 15.2, 4.0 if k % 10 == 0 else 1.5, 298.15)
         runs[q] = core.remaining_runtime(595.0)
     assert runs[0.95].remaining_s < runs[0.0].remaining_s
+
+
+def test_peak_runtime_ends_where_a_peak_from_the_average_trajectory_meets_the_cutoff(temi_runner):
+    cal = calibrate_soc(temi_runner, temi_runner.settled_voltage_v(0.5, 2.0, 298.15), 2.0, 298.15)
+    avg = predict_remaining_runtime(temi_runner, 15.0, 2.0, 298.15, 2.0, 13.30, calibration=cal)
+    peak = predict_remaining_runtime(temi_runner, 15.0, 2.0, 298.15, 2.0, 13.30, calibration=cal,
+                                     peak_current_a=5.0)
+    assert peak.limited_by == "peak_cutoff" and avg.limited_by == "pack_cutoff"
+    assert peak.remaining_s < avg.remaining_s - 600.0  # a 3 A heavier peak costs well over 10 min here
+
+    def peak_voltage_v(t_s):  # independent check: 5 s at 5 A after t_s at 2 A, straight from the runner
+        run = temi_runner.run(cal.start, [(t_s, 2.0), (5.0, 5.0)], 298.15)
+        return float(np.mean(run.pack_voltage_v[run.time_s >= run.time_s[-1] - 5.0 + 1e-9]))
+
+    assert peak_voltage_v(peak.remaining_s - 120.0) > 13.30 > peak_voltage_v(peak.remaining_s + 120.0)
+
+
+def test_peak_no_higher_than_the_average_keeps_the_papers_runtime(temi_runner):
+    cal = calibrate_soc(temi_runner, temi_runner.settled_voltage_v(0.5, 2.0, 298.15), 2.0, 298.15)
+    avg = predict_remaining_runtime(temi_runner, 15.0, 2.0, 298.15, 2.0, 13.30, calibration=cal)
+    low = predict_remaining_runtime(temi_runner, 15.0, 2.0, 298.15, 2.0, 13.30, calibration=cal, peak_current_a=1.5)
+    assert low.remaining_s == avg.remaining_s and low.limited_by == "pack_cutoff"
