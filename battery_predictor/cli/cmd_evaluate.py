@@ -29,8 +29,12 @@ def register(sub) -> None:
     p.add_argument("--base-sets", nargs="+", default=list(BASE_SETS), help="PyBaMM sets compared in Table 2")
     p.add_argument("--trials", type=int, default=300, help="TPE trials per fit (paper: 1000)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--skip", nargs="*", default=[], choices=("table2", "runtime", "routes"),
-                   help="parts to skip")
+    p.add_argument("--storage", default=None,
+                   help="Optuna storage URL of the fits (default: sqlite:///<out>/studies.db, so a stopped "
+                        "evaluation resumes; 'memory' = none)")
+    p.add_argument("--workers", type=int, default=1, help="processes per fit (needs a storage)")
+    p.add_argument("--skip", nargs="*", default=[], choices=("table2", "runtime", "routes", "stepwise"),
+                   help="parts to skip (stepwise: use --ranger-params as they are, no stepwise fit)")
     p.add_argument("--out", default="evaluation", help="report directory")
     p.add_argument("--json", action="store_true", help="print one JSON object with the figures")
     p.set_defaults(func=run)
@@ -56,11 +60,13 @@ def run(args) -> int:
     from battery_predictor.fitting.problem import trim_to_discharge
     from battery_predictor.io.loader import load_recording
     from battery_predictor.params import load_params
+    from battery_predictor.prediction.core import PredictorConfig
 
     tic = time.perf_counter()
     bags = Path(args.bags)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    storage = None if args.storage == "memory" else (args.storage or f"sqlite:///{(out / 'studies.db').resolve()}")
     dyn_files = args.temi_dynamic or _bundled(bags, "temi_dynamic_*")
     static_file = args.temi_static or next(iter(_bundled(bags, "temi_static_*")), None)
     step_file = args.ranger_stepwise or next(iter(_bundled(bags, "ranger_stepwise_*")), None)
@@ -77,7 +83,8 @@ def run(args) -> int:
 
     summary: dict = {"paper": {k: v for k, v in PAPER.items() if k != "table2"},
                      "settings": {"trials per fit": args.trials, "seed": args.seed,
-                                  "base sets": " ".join(args.base_sets), "skipped": " ".join(args.skip) or "none"}}
+                                  "base sets": " ".join(args.base_sets), "skipped": " ".join(args.skip) or "none",
+                                  "storage": storage or "memory"}}
     figures: dict = {}
     temi = load_params(args.temi_params)
     dyn = [trim_to_discharge(load_recording(f)) for f in dyn_files] if need_temi else []
@@ -86,7 +93,7 @@ def run(args) -> int:
     if "table2" not in args.skip:
         log(f"Table 2: {len(args.base_sets)} parameter sets x 2 profiles, {args.trials} trials each ...")
         rows = table2(temi, dyn[0], static, base_sets=args.base_sets, trials=args.trials, seed=args.seed,
-                      progress=lambda m: log("  " + m))
+                      progress=lambda m: log("  " + m), storage=storage, workers=args.workers)
         summary["table2"] = [{"opt_profile": r.opt_profile, "base_parameter_set": r.base_parameter_set,
                               "opt_r2_mod": r.opt_r2_mod, "val_r2_mod": r.val_r2_mod,
                               "parameters": list(r.parameters)} for r in rows]
@@ -101,15 +108,27 @@ def run(args) -> int:
         points = runtime_evaluation(runtime_params, dyn)
         summary["runtime"] = runtime_summary(points)
         summary["runtime_points"] = [dataclasses.asdict(p) for p in points]
-        figures["Fig. 5 kind: remaining runtime"] = report.fig_runtime(points, out / "fig5_runtime.png")
-        log(f"  MAE {summary['runtime']['mae_min']:.2f} min, MAPE {summary['runtime']['mape_pct']:.1f} % "
-            f"(paper {PAPER['runtime_mae_min']} min, {PAPER['runtime_mape_pct']} %)")
+        figures["Fig. 5 kind: remaining runtime (paper strategy)"] = report.fig_runtime(points,
+                                                                                       out / "fig5_runtime.png")
+        log(f"  paper strategy (average load): MAE {summary['runtime']['mae_min']:.2f} min, MAPE "
+            f"{summary['runtime']['mape_pct']:.1f} % (paper {PAPER['runtime_mae_min']} min, "
+            f"{PAPER['runtime_mape_pct']} %)")
+        q = PredictorConfig.__dataclass_fields__["peak_current_quantile"].default
+        if q > 0:
+            peak_points = runtime_evaluation(runtime_params, dyn, peak_current_quantile=q)
+            summary["runtime_peaks"] = {**runtime_summary(peak_points), "peak_current_quantile": q}
+            summary["runtime_peaks_points"] = [dataclasses.asdict(p) for p in peak_points]
+            figures["Fig. 5 kind: remaining runtime (load peaks, the predictor's default)"] = report.fig_runtime(
+                peak_points, out / "fig5_runtime_peaks.png")
+            log(f"  predictor default (load peaks, quantile {q}): MAE {summary['runtime_peaks']['mae_min']:.2f} min, "
+                f"MAPE {summary['runtime_peaks']['mape_pct']:.1f} %")
     if "routes" not in args.skip and route_files:
         ranger = load_params(args.ranger_params)
-        if step_file is not None:
+        if step_file is not None and "stepwise" not in args.skip:
             step = trim_to_discharge(load_recording(step_file))
             log(f"luggage robot: fitting the stepwise experiment ({args.trials} trials) ...")
-            ranger, _, _ = fit_pack(ranger, [step], trials=args.trials, seed=args.seed, screen_first=False)
+            ranger, _, _ = fit_pack(ranger, [step], trials=args.trials, seed=args.seed, screen_first=False,
+                                    storage=storage, workers=args.workers)
             score, res = _score(ranger, step)
             summary["stepwise"] = {"r2_mod": score}
             figures["Fig. 7 kind: stepwise experiment"] = report.fig_stepwise(step, res, score,

@@ -61,7 +61,8 @@ def _score(params: PackParams, rec: Recording):
 
 
 def fit_pack(params: PackParams, recs: Sequence[Recording], *, trials: int, seed: int,
-             storage: str | None = None, screen_first: bool = True) -> tuple[PackParams, tuple[str, ...], object]:
+             storage: str | None = None, screen_first: bool = True,
+             workers: int = 1) -> tuple[PackParams, tuple[str, ...], object]:
     """Screen (optional) and TPE-fit ``params`` to ``recs``; returns fitted params, names, optimiser result."""
     names = tuple(params.fit.parameters)
     if screen_first:
@@ -69,14 +70,16 @@ def fit_pack(params: PackParams, recs: Sequence[Recording], *, trials: int, seed
         names = tuple(n for n in relevant_names(rows) if n not in ("r_b_ohm", "r_c_ohm", "r_i_ohm"))
         names = names + ("r_b_ohm", "r_c_ohm", "r_i_ohm")
     problem = FitProblem(params, list(recs), get_simulator("fast"), initial_state="params")
-    result = TPEOptimiser(n_trials=trials, seed=seed, storage=storage, progress=False).run(
+    result = TPEOptimiser(n_trials=trials, seed=seed, storage=storage, workers=workers, progress=False).run(
         problem, fit_space(params, names))
     return params.with_values(result.best_values), names, result
 
 
 def table2(start: PackParams, dynamic: Recording, static: Recording, *, base_sets: Sequence[str], trials: int,
-           seed: int = 0, progress=None) -> list[FitValidation]:
+           seed: int = 0, progress=None, storage: str | None = None, workers: int = 1) -> list[FitValidation]:
     """Fit on the dynamic discharge and validate on the static one, and vice versa, per base set.
+
+    With an Optuna ``storage`` every fit is a stored study: a stopped evaluation resumes them.
 
     Every base set starts from the params' manual values (paper Table 1) without the shipped fit,
     its fit parameters are the relevant ones of its own screening plus R_b, R_c, R_i.
@@ -86,7 +89,8 @@ def table2(start: PackParams, dynamic: Recording, static: Recording, *, base_set
         params = dataclasses.replace(start, base_parameter_set=base, fitted={}, provenance={})
         for opt_name, opt_rec, val_rec in (("dynamic", dynamic, static), ("static", static, dynamic)):
             try:
-                fitted, names, _ = fit_pack(params, [opt_rec], trials=trials, seed=seed)
+                fitted, names, _ = fit_pack(params, [opt_rec], trials=trials, seed=seed, storage=storage,
+                                            workers=workers)
                 opt_r2, opt_res = _score(fitted, opt_rec)
                 val_r2, val_res = _score(fitted, val_rec)
             except BatteryPredictorError as exc:
