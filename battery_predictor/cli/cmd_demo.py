@@ -68,6 +68,7 @@ def _isolated_context():
 def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -> None:
     from battery_predictor.nodes.replay_session import ReplaySession
     from battery_predictor.replay import (
+        DEFAULT_CHECKPOINTS_MIN,
         OutputBag,
         compare_at_checkpoints,
         error_summary,
@@ -88,7 +89,9 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
     try:
         with ReplaySession(stream, context=context, params_file=str(params), rate=rate, out_bag=output,
                            predictor_overrides={"runtime_period_s": runtime_period_s}) as session:
-            stats = session.play_until()
+            # the checkpoints (30..300 min, as the paper's 5.1.6) need the bag only up to the last one
+            last_s = 60.0 * max(DEFAULT_CHECKPOINTS_MIN) + runtime_period_s
+            stats = session.play_until(stream.ros_time_ns(last_s) if truth and truth.runtime_s > last_s else None)
             session.flush()
             points = session.runtime_points()
             rejected = session.monitor.monitor.rejected_total
@@ -97,7 +100,7 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
     checkpoints = compare_at_checkpoints(points, truth) if truth else []
     png = plot_runtime(points, truth, out / "temi_remaining_runtime.png", checkpoints=checkpoints,
                        title=f"{bag.name}: /remaining_runtime vs truth")
-    print(f"   played in {stats.wall_s:.0f} s; {sum(p.valid for p in points)} valid predictions, "
+    print(f"   played {stats.bag_s / 60:.0f} bag min in {stats.wall_s:.0f} s; {sum(p.valid for p in points)} valid predictions, "
           f"{rejected} samples rejected by the monitor")
     if checkpoints:
         print(f"   {'after':>8} {'predicted':>10} {'true':>8} {'error':>8}")
