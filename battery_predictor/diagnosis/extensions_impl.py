@@ -33,8 +33,8 @@ extension                  what it changes
 ``cell_imbalance``         the cells of one series position hold ``Weak series group capacity
                            fraction`` of the others' capacity (their electrode area is scaled): per-cell
                            values for liionpack (:func:`imbalance_cell_inputs`); the fast simulator adds
-                           a second cell for the weak group (:func:`weak_group_params`). Not yet in the
-                           predictor's runner (it simulates the normal cells only).
+                           a second cell for the weak group (:func:`weak_group_params`), and so does
+                           the predictor's runner (``prediction.cell_runner.PackRunner``).
 ``electrolyte_transport``  the SPMe (electrolyte concentration and potential) instead of the SPM,
                            with the fitted Bruggeman exponent ``Electrolyte Bruggeman coefficient
                            [-]`` (tortuosity: effective transport = eps ** b) in every region.
