@@ -49,12 +49,12 @@ import rclpy  # noqa: E402
 from battery_predictor_msgs.srv import CanAcceptRoute  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from rclpy.context import Context  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import BatteryState  # noqa: E402
 
 from battery_predictor.conventions import internal_current_to_battery_state  # noqa: E402
+from battery_predictor.nodes.executor import StartedMultiThreadedExecutor  # noqa: E402
 from battery_predictor.nodes.messages import route_section_msgs  # noqa: E402
 from battery_predictor.profiles.ranger import longest_route  # noqa: E402
 
@@ -176,7 +176,7 @@ def main() -> int:
     context = Context()
     rclpy.init(args=[], context=context, domain_id=domain)
     bench = Bench(context, args.voltage)
-    executor = MultiThreadedExecutor(num_threads=2, context=context)
+    executor = StartedMultiThreadedExecutor(num_threads=2, context=context)
     executor.add_node(bench)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()

@@ -4,7 +4,7 @@
                           [--ros-args ...]
 
 Same as starting the ``battery_monitor`` and ``predictor`` console scripts with
-``--ros-args --params-file P.yaml``, on one MultiThreadedExecutor. Ctrl-C stops.
+``--ros-args --params-file P.yaml``, on one StartedMultiThreadedExecutor (``nodes/executor.py``). Ctrl-C stops.
 """
 
 from __future__ import annotations

@@ -7,17 +7,18 @@ from collections.abc import Callable, Sequence
 
 import rclpy
 from rclpy.exceptions import NameValidationException, ParameterException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.nodes.executor import StartedMultiThreadedExecutor
 
 #: Errors in the configuration (parameters, names): one line on stderr and exit code 2, no traceback.
 CONFIG_ERRORS = (ValueError, BatteryPredictorError, ParameterException, NameValidationException)
 
 
 def spin_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None, *, threads: int = 4) -> int:
-    """``rclpy.init``, build the nodes, spin a MultiThreadedExecutor until Ctrl-C or shutdown, clean up.
+    """``rclpy.init``, build the nodes, spin a StartedMultiThreadedExecutor until Ctrl-C or shutdown, clean up.
 
     Parameters
     ----------
@@ -30,7 +31,7 @@ def spin_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None =
     """
     rclpy.init(args=sys.argv if args is None else args)
     nodes: list[Node] = []
-    executor = MultiThreadedExecutor(num_threads=threads)
+    executor = StartedMultiThreadedExecutor(num_threads=threads)
     code = 0
     try:
         for factory in factories:

@@ -15,7 +15,7 @@ A thin adapter around :class:`battery_predictor.prediction.core.PredictorCore`
 
 Threading: three mutually exclusive callback groups -- pack states, the runtime
 timer (the ~0.1 s model run), the service -- so with a
-:class:`~rclpy.executors.MultiThreadedExecutor` the service is answered while a
+:class:`~.executor.StartedMultiThreadedExecutor` the service is answered while a
 runtime update runs. The core is thread-safe and caches its SOC calibration, so
 by default the service shares the runtime's model and reuses its calibration;
 ``separate_route_model`` gives the service a model of its own instead (one model

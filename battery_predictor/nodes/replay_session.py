@@ -4,7 +4,8 @@
 ``use_sim_time`` (parameters from a ``node_name: ros__parameters:`` file plus
 overrides), a :class:`~.bag_player_node.BagPlayerNode` and an
 :class:`~.output_recorder_node.OutputRecorderNode`, all on one
-:class:`~rclpy.executors.MultiThreadedExecutor` spinning in a background thread.
+:class:`~.executor.StartedMultiThreadedExecutor` (the production executor) spinning in a
+background thread.
 
 Playing a bag (:meth:`ReplaySession.play_until`) goes through its messages
 grouped by log time; for every group it
@@ -36,7 +37,6 @@ from typing import Any
 
 from battery_predictor_msgs.srv import CanAcceptRoute
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -44,6 +44,7 @@ from battery_predictor.errors import BagError, BatteryPredictorError
 from battery_predictor.io.bags import RELAY_SUFFIXES
 from battery_predictor.nodes.bag_player_node import BagPlayerNode
 from battery_predictor.nodes.battery_monitor_node import BatteryMonitorNode
+from battery_predictor.nodes.executor import StartedMultiThreadedExecutor
 from battery_predictor.nodes.messages import stamp_to_s
 from battery_predictor.nodes.output_recorder_node import OutputRecorderNode
 from battery_predictor.nodes.predictor_node import PredictorNode
@@ -140,7 +141,7 @@ class ReplaySession:
             for node in self._nodes:
                 node.destroy_node()
             raise
-        self.executor = MultiThreadedExecutor(num_threads=threads, context=context)
+        self.executor = StartedMultiThreadedExecutor(num_threads=threads, context=context)
         for node in self._nodes:
             self.executor.add_node(node)
         self._thread = threading.Thread(target=self._spin, name="replay-executor", daemon=True)

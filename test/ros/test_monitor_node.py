@@ -1,7 +1,7 @@
 """battery_monitor over rclpy: NaN / out-of-range samples are counted on /diagnostics and never reach the model.
 
 The real nodes (monitor + predictor with the bundled node params) run on a
-MultiThreadedExecutor with ``use_sim_time``; the test publishes ``/clock`` and
+StartedMultiThreadedExecutor with ``use_sim_time``; the test publishes ``/clock`` and
 the samples itself and waits, after each step, until the nodes have handled it
 (lock step, :class:`~battery_predictor.nodes.replay_session.ReplaySession`),
 so nothing depends on the machine's speed.
