@@ -195,12 +195,14 @@ def evidence_text(cause: str, base, best, results, analysis: ResidualAnalysis, n
     if pairs:
         parts.append("Not separable in these recordings (they move together): " + "; ".join(pairs) + ".")
     if cause == "none":
-        from battery_predictor.diagnosis.diagnose import BASELINE_FLOOR_FACTOR
+        from battery_predictor.diagnosis.diagnose import BASELINE_FLOOR_FACTOR, RESTORE_FACTOR, RESTORE_MIN_GAIN_PCT
 
         floor = noise_mv if floor_mv is None else floor_mv
         if base.heldout_rmse_mV <= BASELINE_FLOOR_FACTOR * floor:
             parts.append(f"The baseline predicts the held-out data within {BASELINE_FLOOR_FACTOR:.0f}x its error floor "
-                         f"({floor:.1f} mV: noise, or its RMSE on the reference data), so nothing is claimed"
+                         f"({floor:.1f} mV: noise, or its RMSE on the reference data), and no candidate brings it "
+                         f"back to {RESTORE_FACTOR:.2g}x that floor with a gain of {RESTORE_MIN_GAIN_PCT:.0f} % or "
+                         "more, so nothing is claimed"
                          + (f" (best candidate {best.cause}: {best.heldout_rmse_mV:.1f} mV)." if best else "."))
         elif best is not None:
             parts.append(f"No candidate predicts the held-out data meaningfully better: best is {best.cause} "
@@ -221,7 +223,8 @@ def evidence_text(cause: str, base, best, results, analysis: ResidualAnalysis, n
         parts.append("Next best: " + ", ".join(f"{r.cause} {r.heldout_rmse_mV:.1f} mV ({r.gain_pct:+.1f} %)"
                                                for r in others) + ".")
     if close:
-        parts.append(f"Within 10 % of it, hence not clearly separable on these data: {', '.join(close)}.")
+        parts.append(f"Within 10 % of its error above the noise, hence not clearly separable on these data: "
+                     f"{', '.join(close)}.")
     if (cause in CAPACITY_LIKE and temperature_shift_k is not None
             and abs(temperature_shift_k) > TEMPERATURE_CAVEAT_K):
         parts.append(f"Caveat: the observed recordings are {abs(temperature_shift_k):.0f} K "
