@@ -27,7 +27,7 @@ def register(sub) -> None:
     p.add_argument("--write-params", default=None, metavar="OUT",
                    help="write the params with the named extension active and its fitted values")
     p.add_argument("--budget", type=int, default=None,
-                   help="model evaluations of each observed-data fit, baseline and candidates alike (default 40)")
+                   help="model evaluations of each observed-data fit, baseline and candidates alike (default 80)")
     p.add_argument("--reference-budget", type=int, default=None,
                    help="model evaluations of the reference fit (default 150)")
     p.add_argument("--fit-fraction", type=float, default=0.6,
