@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -33,6 +35,23 @@ def _wait(condition, timeout_s: float = TIMEOUT_S) -> bool:
     return True
 
 
+@contextmanager
+def _spinning(node: Node, context: Context, release: threading.Event) -> Iterator[threading.Thread]:
+    """Spin ``node`` on a 2-thread StartedMultiThreadedExecutor in a thread; on exit release the
+    blocked callbacks, shut the executor down and destroy the node."""
+    executor = StartedMultiThreadedExecutor(num_threads=2, context=context)
+    executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    try:
+        yield thread
+    finally:
+        release.set()
+        executor.shutdown()
+        thread.join(timeout=10.0)
+        node.destroy_node()
+
+
 def test_a_callback_runs_while_another_callback_of_another_group_is_still_running(
         ros_context: Context, unique_name: str) -> None:
     node = Node(unique_name, context=ros_context)
@@ -52,21 +71,12 @@ def test_a_callback_runs_while_another_callback_of_another_group_is_still_runnin
     node.create_subscription(Int64, f"/{unique_name}/b", second, 10, callback_group=MutuallyExclusiveCallbackGroup())
     pub_a = node.create_publisher(Int64, f"/{unique_name}/a", 10)
     pub_b = node.create_publisher(Int64, f"/{unique_name}/b", 10)
-    executor = StartedMultiThreadedExecutor(num_threads=2, context=ros_context)
-    executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
-    try:
+    with _spinning(node, ros_context, release) as thread:
         assert _wait(lambda: pub_a.get_subscription_count() >= 1 and pub_b.get_subscription_count() >= 1)
         pub_a.publish(Int64(data=1))
         assert first_started.wait(TIMEOUT_S)
         pub_b.publish(Int64(data=2))
         assert second_ran.wait(TIMEOUT_S), "the second callback did not run while the first was running"
-    finally:
-        release.set()
-        executor.shutdown()
-        thread.join(timeout=10.0)
-        node.destroy_node()
     assert not thread.is_alive()
 
 
@@ -88,11 +98,7 @@ def test_the_spin_thread_does_not_busy_loop_while_a_callback_waits_for_a_free_wo
     # reentrant: every message may run at once, so the third one waits only for a free worker
     node.create_subscription(Int64, f"/{unique_name}/s", slow, 10, callback_group=ReentrantCallbackGroup())
     pub = node.create_publisher(Int64, f"/{unique_name}/s", 10)
-    executor = StartedMultiThreadedExecutor(num_threads=2, context=ros_context)
-    executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
-    try:
+    with _spinning(node, ros_context, release):
         assert _wait(lambda: pub.get_subscription_count() >= 1)
         pub.publish(Int64(data=1))
         pub.publish(Int64(data=2))
@@ -104,10 +110,5 @@ def test_the_spin_thread_does_not_busy_loop_while_a_callback_waits_for_a_free_wo
         cpu_per_wall = (time.process_time() - cpu0) / (time.monotonic() - wall0)
         release.set()
         assert _wait(lambda: sorted(done) == [1, 2, 3]), f"callbacks done {done}"
-    finally:
-        release.set()
-        executor.shutdown()
-        thread.join(timeout=10.0)
-        node.destroy_node()
     # idle waiting costs ~0; rclpy 7.1's MultiThreadedExecutor spends ~1 CPU second per second here
     assert cpu_per_wall < 0.3, f"the executor used {cpu_per_wall:.2f} CPU s per s while waiting"

@@ -241,10 +241,12 @@ def test_failed_evaluations_are_penalised_not_fatal():
     assert res.failures >= 1 and 0.45 < res.u[0] <= 0.52  # steps into the failing region were penalised
 
 
-def test_choose_best_prefers_the_simpler_of_two_equal_candidates():
-    def row(cause, rmse):
-        return CandidateResult(cause, {}, [], rmse, 0.99, None, 0, 0, 0, 0)
+def row(cause: str, rmse_mv: float) -> CandidateResult:
+    """A scored candidate with only its held-out RMSE (mV) set."""
+    return CandidateResult(cause, {}, [], rmse_mv, 0.99, None, 0, 0, 0, 0)
 
+
+def test_choose_best_prefers_the_simpler_of_two_equal_candidates():
     rows = [row("electrolyte_transport", 8.6), row("resistance_growth", 9.2), row("hysteresis", 30.0)]
     assert choose_best(rows, noise_mv=3.0).cause == "resistance_growth"
     rows = [row("electrolyte_transport", 7.4), row("resistance_growth", 39.7)]
@@ -252,9 +254,6 @@ def test_choose_best_prefers_the_simpler_of_two_equal_candidates():
 
 
 def test_choose_best_compares_the_error_above_the_noise():
-    def row(cause, rmse):
-        return CandidateResult(cause, {}, [], rmse, 0.99, None, 0, 0, 0, 0)
-
     # 12.4 vs 15.6 mV at 4.1 mV noise: 11.7 vs 15.0 mV above it, 28 % more, so separable (a hidden
     # hysteresis once lost to the simpler contact resistance under a one-noise-level margin)
     rows = [row("hysteresis", 12.4), row("resistance_growth", 15.6), row("temperature", 26.2)]
