@@ -1,0 +1,14 @@
+"""The SPM pack engine: PyBaMM's discretised SPM stepped exactly on piecewise-constant currents.
+
+- :mod:`~battery_predictor.simulation.engine.model`: the linear particle blocks and the voltage
+  expression taken from PyBaMM's discretised model;
+- :mod:`~battery_predictor.simulation.engine.modal`: exact zero-order-hold stepping in modal
+  coordinates (Numba kernel when installed, NumPy otherwise);
+- :mod:`~battery_predictor.simulation.engine.run`: cell runs with the voltage at every step and the
+  exact cut-off time, batched over parameter sets and initial states;
+- :mod:`~battery_predictor.simulation.engine.pack`: the pack voltage (the one implementation).
+"""
+
+from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
+
+__all__ = ["pack_voltage_v", "series_resistance_factor"]

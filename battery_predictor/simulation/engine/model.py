@@ -1,0 +1,296 @@
+"""The SPM as PyBaMM discretises it, split into linear particle blocks and a voltage function.
+
+PyBaMM's discretised single particle model (finite volumes on a uniform mesh of each particle,
+default 20 cells) is, in its own state vector ``y`` (concentrations divided by their scale),
+
+* two decoupled linear blocks, one per electrode: ``dy_e/dt = A_e y_e + b_e I`` with the cell
+  current ``I`` (A) as input;
+* a surface value per electrode, ``s_e = m_e . y_e`` (PyBaMM's extrapolation row);
+* a terminal voltage that depends on the state only through ``s_n``, ``s_p`` (open-circuit
+  potentials, Butler-Volmer overpotentials and whatever else the built expression holds).
+
+:func:`extract_linear_spm` builds the params' model with PyBaMM, discretises it with the model's
+default mesh and spatial methods (``pybamm.Simulation.build``), reads ``A_e``, ``b_e`` and
+``m_e`` off the discretised right-hand side and surface variables by evaluating them on unit
+vectors, checks that they are exactly linear, and rewrites PyBaMM's discretised voltage
+expression so that its surface values, current, temperature, active material volume fractions
+and electrode height are rows of a small input array. The physics therefore has one source:
+PyBaMM's expression tree, evaluated by PyBaMM.
+
+Geometric scaling rules used to vary parameter sets without a rebuild (checked against PyBaMM
+rebuilds in the tests): on PyBaMM's uniform ``r`` mesh from 0 to the particle radius ``R``,
+``A_e`` scales with ``D / R**2``; ``b_e`` with ``1 / (eps L H)`` (active fraction, thickness,
+electrode height); the surface row is scale-free; the voltage sees ``R``, ``L`` and ``eps`` only
+through the reaction area ``3 eps L / R``, so a set is evaluated with the equivalent volume
+fraction ``eps L R_0 / (L_0 R)``.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from battery_predictor.errors import SimulationError
+from battery_predictor.simulation.cell_setup import build_model, prepared_parameter_values, quiet_pybamm
+
+CURRENT = "Current function [A]"
+C_N0 = "Initial concentration in negative electrode [mol.m-3]"
+C_P0 = "Initial concentration in positive electrode [mol.m-3]"
+T_AMB = "Ambient temperature [K]"
+T_INIT = "Initial temperature [K]"
+EPS_N = "Negative electrode active material volume fraction"
+EPS_P = "Positive electrode active material volume fraction"
+HEIGHT = "Electrode height [m]"
+#: PyBaMM keys that become ``[input]`` parameters of the extracted model.
+INPUT_KEYS = (CURRENT, C_N0, C_P0, T_AMB, T_INIT, EPS_N, EPS_P, HEIGHT)
+#: Rows of the voltage function's input array, in order.
+VOLTAGE_ROWS = ("surface_n", "surface_p", CURRENT, T_AMB, EPS_N, EPS_P, HEIGHT)
+_PARTICLE_VARIABLES = {
+    "negative": "X-averaged negative particle concentration [mol.m-3]",
+    "positive": "X-averaged positive particle concentration [mol.m-3]",
+}
+_SURFACE_VARIABLES = {
+    "negative": "X-averaged negative particle surface concentration [mol.m-3]",
+    "positive": "X-averaged positive particle surface concentration [mol.m-3]",
+}
+#: Largest relative deviation from linearity accepted in the extracted particle equations.
+_LINEARITY_RTOL = 1e-9
+
+
+@dataclass(frozen=True)
+class ParticleBlock:
+    """One electrode's discretised particle: ``dy/dt = A y + b I``, surface ``s = m . y``.
+
+    Attributes
+    ----------
+    electrode : str
+        ``"negative"`` or ``"positive"``.
+    state_slice : slice
+        Where the block sits in PyBaMM's state vector.
+    a_matrix_per_s : numpy.ndarray
+        ``A`` (1/s), shape (n, n).
+    b_vector_per_a_s : numpy.ndarray
+        ``b`` (1/(A s)), shape (n,).
+    surface_row : numpy.ndarray
+        ``m`` (dimensionless), shape (n,).
+    scale_mol_m3 : float
+        PyBaMM's scale of the block's state (concentration = scale x state), mol/m3.
+    """
+
+    electrode: str
+    state_slice: slice
+    a_matrix_per_s: np.ndarray
+    b_vector_per_a_s: np.ndarray
+    surface_row: np.ndarray
+    scale_mol_m3: float
+
+
+@dataclass(frozen=True, eq=False)
+class LinearSpm:
+    """PyBaMM's discretised SPM of one cell split into linear blocks and a voltage function.
+
+    Attributes
+    ----------
+    blocks : tuple of ParticleBlock
+        Negative and positive particle.
+    voltage_symbol : object
+        PyBaMM expression of the terminal voltage (V) whose ``y`` is the input array of
+        :data:`VOLTAGE_ROWS` (one column per evaluation point).
+    built_values : dict
+        Values of the built cell: the :data:`INPUT_KEYS` defaults, particle radii (m),
+        diffusivities (m2/s), thicknesses (m).
+    lower_cutoff_v : float
+        Lower voltage cut-off of the cell (V).
+    """
+
+    blocks: tuple[ParticleBlock, ParticleBlock]
+    voltage_symbol: object
+    built_values: dict
+    lower_cutoff_v: float
+
+    def cell_voltage_v(self, surface_n: np.ndarray, surface_p: np.ndarray, current_a: np.ndarray,
+                       temperature_k, eps_n=None, eps_p=None, height_m=None) -> np.ndarray:
+        """Terminal voltage (V) of the cell at surface states and cell currents (A), elementwise.
+
+        ``surface_*`` are PyBaMM's scaled surface values (``m . y``). The optional values default
+        to the built cell's and broadcast against the surface arrays.
+        """
+        surface_n = np.asarray(surface_n, dtype=float)
+        shape = np.broadcast_shapes(surface_n.shape, np.shape(surface_p), np.shape(current_a))
+        b = self.built_values
+        rows = (surface_n, surface_p, current_a, temperature_k,
+                b[EPS_N] if eps_n is None else eps_n, b[EPS_P] if eps_p is None else eps_p,
+                b[HEIGHT] if height_m is None else height_m)
+        size = int(np.prod(shape)) if shape else 1
+        aux = np.empty((len(rows), size))
+        for k, row in enumerate(rows):
+            aux[k] = np.broadcast_to(np.asarray(row, dtype=float), shape).ravel()
+        out = self._evaluator(0.0, aux)
+        return np.asarray(out, dtype=float).reshape(shape)
+
+    @functools.cached_property
+    def _evaluator(self):
+        """The voltage expression as generated NumPy code (PyBaMM's ``EvaluatorPython``)."""
+        import pybamm
+
+        return pybamm.EvaluatorPython(self.voltage_symbol)
+
+    def initial_state(self, c_n0_mol_m3: float, c_p0_mol_m3: float) -> tuple[np.ndarray, np.ndarray]:
+        """Uniform particle states (PyBaMM's scaled ``y`` of each block) for initial concentrations."""
+        return tuple(np.full(blk.b_vector_per_a_s.size, c / blk.scale_mol_m3)  # type: ignore[return-value]
+                     for blk, c in zip(self.blocks, (c_n0_mol_m3, c_p0_mol_m3)))
+
+
+def _built_simulation(params):
+    import pybamm
+
+    if params.model != "SPM" or params.options or params.extensions:
+        raise SimulationError(f"{params.source}: the engine handles the isothermal SPM without options or "
+                              f"extensions (model {params.model}, options {dict(params.options)}, extensions "
+                              f"{list(params.extensions)})")
+    pv = prepared_parameter_values(params)
+    built = {key: float(pv[key]) for key in (C_N0, C_P0, T_AMB, EPS_N, EPS_P, HEIGHT)}
+    for electrode in ("Negative", "Positive"):
+        for key in (f"{electrode} particle radius [m]", f"{electrode} particle diffusivity [m2.s-1]",
+                    f"{electrode} electrode thickness [m]"):
+            value = pv[key]
+            if not isinstance(value, (int, float)):
+                raise SimulationError(f"{params.source}: '{key}' is not a constant; the engine needs a constant")
+            built[key] = float(value)
+    built[T_INIT] = built[T_AMB]
+    built[CURRENT] = 0.0
+    cutoff = float(pv["Lower voltage cut-off [V]"])
+    for key in INPUT_KEYS:
+        pv[key] = "[input]"
+    try:
+        with quiet_pybamm():
+            sim = pybamm.Simulation(build_model(params), parameter_values=pv)
+            sim.build()
+    except (pybamm.ModelError, pybamm.DiscretisationError, KeyError, ValueError) as exc:
+        raise SimulationError(f"cannot build the cell model: {str(exc).splitlines()[0]}") from None
+    return sim.built_model, built, cutoff
+
+
+def _block_slices(model) -> dict[str, slice]:
+    slices = {}
+    for var, sl in model.y_slices.items():
+        for electrode, name in _PARTICLE_VARIABLES.items():
+            if var.name == name:
+                slices[electrode] = sl[0]
+    if set(slices) != set(_PARTICLE_VARIABLES):
+        raise SimulationError("the built model has no x-averaged particle concentrations (not an SPM?)")
+    return slices
+
+
+def _linear_map(symbol, n_states: int, inputs: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(Jacobian, value at y = 0 with the current 1 A) of a symbol that must be affine in y and I."""
+    zero = np.zeros((n_states, 1))
+    idle = dict(inputs, **{CURRENT: 0.0})
+    base = np.asarray(symbol.evaluate(0.0, zero, inputs=idle), dtype=float).ravel()
+    jac = np.asarray(symbol.evaluate(0.0, np.eye(n_states), inputs=idle), dtype=float)
+    jac = jac.reshape(base.size, n_states) - base[:, None]
+    unit = np.asarray(symbol.evaluate(0.0, zero, inputs=dict(inputs, **{CURRENT: 1.0})), dtype=float).ravel() - base
+    rng = np.random.default_rng(0)
+    y_test = rng.uniform(0.1, 0.9, (n_states, 1))
+    current_a = 3.7
+    got = np.asarray(symbol.evaluate(0.0, y_test, inputs=dict(inputs, **{CURRENT: current_a})), dtype=float).ravel()
+    want = base + jac @ y_test.ravel() + unit * current_a
+    if not np.allclose(got, want, rtol=_LINEARITY_RTOL, atol=_LINEARITY_RTOL * max(1.0, float(np.abs(want).max()))):
+        raise SimulationError("the discretised particle equations are not linear in the state (concentration-"
+                              "dependent diffusivity?); use the fast simulator")
+    if np.abs(base).max() > _LINEARITY_RTOL * max(1.0, float(np.abs(jac).max())):
+        raise SimulationError("the discretised particle equations have a source term at rest")
+    return jac, unit
+
+
+def _replace(symbol, rule):
+    """A copy of ``symbol`` with every subtree for which ``rule`` returns a symbol replaced by it."""
+    new = rule(symbol)
+    if new is not None:
+        return new
+    if not symbol.children:
+        return symbol
+    children = [_replace(child, rule) for child in symbol.children]
+    if all(c is o for c, o in zip(children, symbol.children)):
+        return symbol
+    return symbol.create_copy(new_children=children)
+
+
+def _voltage_symbol(model, slices: dict[str, slice]):
+    """PyBaMM's discretised voltage with surface values and inputs as rows of :data:`VOLTAGE_ROWS`."""
+    import pybamm
+
+    rows = {name: pybamm.StateVector(slice(k, k + 1)) for k, name in enumerate(VOLTAGE_ROWS)}
+    by_start = {sl.start: electrode for electrode, sl in slices.items()}
+    surface_rows: dict[str, np.ndarray] = {}
+
+    def rule(sym):
+        if isinstance(sym, pybamm.MatrixMultiplication) and isinstance(sym.right, pybamm.StateVector):
+            start = sym.right.y_slices[0].start
+            if start not in by_start or sym.shape != (1, 1):
+                raise SimulationError("the voltage depends on the state other than through surface values")
+            electrode = by_start[start]
+            row = np.asarray(sym.left.entries.toarray() if hasattr(sym.left.entries, "toarray")
+                             else sym.left.entries, dtype=float).ravel()
+            factor = float(row.sum())  # extrapolation rows of the scaled state sum to one
+            if factor == 0.0:
+                raise SimulationError(f"the voltage uses a {electrode} state row that is not a surface value")
+            unit_row = row / factor
+            if electrode in surface_rows and not np.allclose(surface_rows[electrode], unit_row, rtol=1e-13, atol=0):
+                raise SimulationError(f"the voltage uses two different {electrode} surface rows")
+            surface_rows.setdefault(electrode, unit_row)
+            placeholder = rows[f"surface_{electrode[0]}"]
+            return placeholder if factor == 1.0 else pybamm.Scalar(factor) * placeholder
+        if isinstance(sym, pybamm.StateVector):
+            raise SimulationError("the voltage depends on the state other than through surface values")
+        if isinstance(sym, pybamm.InputParameter):
+            if sym.name not in rows:
+                raise SimulationError(f"the voltage depends on the input '{sym.name}'")
+            return rows[sym.name]
+        return None
+
+    voltage = _replace(model.variables["Voltage [V]"], rule)
+    return voltage, surface_rows
+
+
+def extract_linear_spm(params) -> LinearSpm:
+    """PyBaMM's discretised SPM of ``params``' cell as a :class:`LinearSpm`.
+
+    Raises
+    ------
+    SimulationError
+        When the model is not an isothermal SPM whose particle equations are linear and whose
+        voltage depends on the state through the two surface values only.
+    """
+    model, built, cutoff = _built_simulation(params)
+    slices = _block_slices(model)
+    n_states = model.concatenated_rhs.shape[0]
+    inputs = {key: built[key] for key in INPUT_KEYS}
+    voltage, surface_rows = _voltage_symbol(model, slices)
+    if set(surface_rows) != set(slices):
+        raise SimulationError("the voltage does not depend on both surface values")
+    blocks = []
+    for electrode, sl in slices.items():
+        var = next(v for v in model.y_slices if v.name == _PARTICLE_VARIABLES[electrode])
+        jac, unit = _linear_map(model.rhs[var], n_states, inputs)
+        outside = np.delete(jac, np.arange(sl.start, sl.stop), axis=1)
+        if np.abs(outside).max(initial=0.0) > 0.0:
+            raise SimulationError(f"the {electrode} particle is coupled to other states")
+        scale = float(var.scale.evaluate()) if hasattr(var.scale, "evaluate") else float(var.scale)
+        row = surface_rows[electrode]
+        _check_surface(model.variables[_SURFACE_VARIABLES[electrode]], sl, row * scale, n_states, inputs, electrode)
+        blocks.append(ParticleBlock(electrode=electrode, state_slice=sl, a_matrix_per_s=jac[:, sl],
+                                    b_vector_per_a_s=unit, surface_row=row, scale_mol_m3=scale))
+    return LinearSpm(blocks=(blocks[0], blocks[1]), voltage_symbol=voltage, built_values=built,
+                     lower_cutoff_v=cutoff)
+
+
+def _check_surface(surface, sl: slice, row_mol_m3: np.ndarray, n_states: int, inputs: dict, electrode: str) -> None:
+    """The surface concentration variable must be the voltage's surface row times the scale, without feed-through."""
+    jac, unit = _linear_map(surface, n_states, inputs)
+    want = np.zeros(n_states)
+    want[sl] = row_mol_m3
+    if np.abs(unit).max() > 0.0 or not np.allclose(jac.ravel(), want, rtol=1e-12, atol=1e-9):
+        raise SimulationError(f"the {electrode} surface concentration is not the voltage's surface row")

@@ -1,0 +1,272 @@
+"""Cell runs on piecewise-constant currents: voltage at every step and the exact cut-off time.
+
+The particle states at every step boundary come from the exact modal recurrence
+(:mod:`battery_predictor.simulation.engine.modal`); the cell voltage is PyBaMM's voltage
+expression evaluated on all boundaries at once, just after each step start (under the step's
+current, right-continuous) and at each step end (under the same current). The run ends at the
+first step whose start or end voltage is below the lower cut-off: at the step start when the
+start voltage is, else at the root of the voltage inside the step (regula falsi on the exact
+within-step solution), which is where PyBaMM's ``Minimum voltage`` event stops its solver. A
+voltage that dips below the cut-off and recovers within one constant-current step is not seen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from battery_predictor.errors import SimulationError
+from battery_predictor.simulation.engine.modal import ModalSystem, boundary_surfaces, states_at, step_coefficients
+from battery_predictor.simulation.engine.model import (
+    EPS_N,
+    EPS_P,
+    HEIGHT,
+    LinearSpm,
+)
+
+#: Cut-off times are located to this accuracy (s).
+CUTOFF_TIME_TOL_S = 1e-7
+_MAX_ROOT_ITERATIONS = 100
+
+
+@dataclass(frozen=True)
+class ParameterSets:
+    """Cells that differ from the built cell by factors on geometric and transport values.
+
+    Every attribute is a factor (1 = the built value), a float or an array of shape (n_sets,).
+    None of them needs a PyBaMM rebuild (see :mod:`battery_predictor.simulation.engine.model`).
+    """
+
+    radius_n: object = 1.0
+    radius_p: object = 1.0
+    diffusivity_n: object = 1.0
+    diffusivity_p: object = 1.0
+    thickness_n: object = 1.0
+    thickness_p: object = 1.0
+    fraction_n: object = 1.0
+    fraction_p: object = 1.0
+    height: object = 1.0
+
+    def size(self) -> int:
+        """Number of sets (1 when every factor is a scalar)."""
+        sizes = {np.size(v) for v in vars(self).values()} - {1}
+        if len(sizes) > 1:
+            raise SimulationError(f"parameter set factors have different lengths: {sorted(sizes)}")
+        return sizes.pop() if sizes else 1
+
+    def arrays(self, n_sets: int) -> dict[str, np.ndarray]:
+        """Every factor as an array of shape (n_sets,)."""
+        out = {}
+        for key, value in vars(self).items():
+            arr = np.broadcast_to(np.asarray(value, dtype=float), (n_sets,))
+            if not np.all(np.isfinite(arr)) or np.any(arr <= 0.0):
+                raise SimulationError(f"parameter set factor {key} must be finite and > 0")
+            out[key] = arr
+        return out
+
+
+@dataclass
+class CellRuns:
+    """Runs of one or many cells on the same steps.
+
+    Attributes
+    ----------
+    step_start_s : numpy.ndarray
+        Step start times (s), shape (n_steps,).
+    start_voltage_v : numpy.ndarray
+        Cell voltage (V) just after each step start, shape (n_sets, n_steps); NaN from the
+        step at whose start the run had ended.
+    end_voltage_v : numpy.ndarray
+        Cell voltage (V) at each step end under the step's current; NaN from the cut-off step on.
+    end_time_s : numpy.ndarray
+        When each run ended (s): at the cut-off, else at the end of the steps.
+    reached_cutoff : numpy.ndarray
+        True where the cell reached its lower cut-off.
+    cutoff_step : numpy.ndarray
+        Index of the step in which the run ended (n_steps when it did not).
+    """
+
+    step_start_s: np.ndarray
+    start_voltage_v: np.ndarray
+    end_voltage_v: np.ndarray
+    end_time_s: np.ndarray
+    reached_cutoff: np.ndarray
+    cutoff_step: np.ndarray
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class _Batch:
+    """Per-set arrays of one run: modal eigenvalues, inputs, voltage inputs, temperature."""
+
+    lam: np.ndarray
+    drive: np.ndarray
+    eps_n: np.ndarray
+    eps_p: np.ndarray
+    height_m: np.ndarray
+    temperature_k: np.ndarray
+
+
+def _batch(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: int, temperature_k) -> _Batch:
+    f = sets.arrays(n_sets)
+    a_n = f["diffusivity_n"] / f["radius_n"] ** 2
+    a_p = f["diffusivity_p"] / f["radius_p"] ** 2
+    b_n = 1.0 / (f["fraction_n"] * f["thickness_n"] * f["height"])
+    b_p = 1.0 / (f["fraction_p"] * f["thickness_p"] * f["height"])
+    built = model.built_values
+    return _Batch(
+        lam=modal.eigenvalues_per_s[None, :] * modal.electrode_factors(a_n, a_p),
+        drive=modal.input_per_a_s[None, :] * modal.electrode_factors(b_n, b_p),
+        eps_n=built[EPS_N] * f["fraction_n"] * f["thickness_n"] / f["radius_n"],
+        eps_p=built[EPS_P] * f["fraction_p"] * f["thickness_p"] / f["radius_p"],
+        height_m=built[HEIGHT] * f["height"],
+        temperature_k=np.broadcast_to(np.asarray(temperature_k, dtype=float), (n_sets,)),
+    )
+
+
+def _voltage(model: LinearSpm, batch: _Batch, surfaces: np.ndarray, current_a: np.ndarray) -> np.ndarray:
+    """Cell voltage (V) for surfaces (n_sets, n, 2) and currents broadcast to (n_sets, n)."""
+    col = (slice(None), None)
+    return model.cell_voltage_v(surfaces[..., 0], surfaces[..., 1], current_a, batch.temperature_k[col],
+                                batch.eps_n[col], batch.eps_p[col], batch.height_m[col])
+
+
+def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, *, c_n0_mol_m3, c_p0_mol_m3,
+              temperature_k, sets: ParameterSets | None = None, backend: str = "auto",
+              stride: int = 64) -> CellRuns:
+    """Run cells from uniform particles through constant-current steps until the cut-off.
+
+    Parameters
+    ----------
+    model, modal : LinearSpm, ModalSystem
+        The extracted cell and its modal form.
+    duration_s, cell_current_a : array_like
+        Step lengths (s, > 0) and cell currents (A, positive = discharge), shape (n_steps,).
+    c_n0_mol_m3, c_p0_mol_m3 : float or array_like
+        Initial (uniform) electrode concentrations in mol/m3, scalar or (n_sets,).
+    temperature_k : float or array_like
+        Cell temperature in K (isothermal), scalar or (n_sets,).
+    sets : ParameterSets, optional
+        Cells that differ from the built one; None runs the built cell.
+    backend : str
+        Recurrence backend: ``"auto"``, ``"numba"`` or ``"numpy"``.
+    stride : int
+        Modal states kept every ``stride`` steps (1 keeps all, for :func:`states_at_times`).
+
+    Returns
+    -------
+    CellRuns
+    """
+    duration_s = np.asarray(duration_s, dtype=float)
+    current = np.asarray(cell_current_a, dtype=float)
+    if duration_s.ndim != 1 or duration_s.shape != current.shape or duration_s.size == 0:
+        raise SimulationError("steps: durations and currents must be 1-D of equal non-zero length")
+    if not (np.all(np.isfinite(duration_s)) and np.all(duration_s > 0) and np.all(np.isfinite(current))):
+        raise SimulationError("steps: durations must be finite and > 0 s, currents finite")
+    sets = sets or ParameterSets()
+    n_sets = max(sets.size(), np.size(c_n0_mol_m3), np.size(c_p0_mol_m3), np.size(temperature_k))
+    batch = _batch(model, modal, sets, n_sets, temperature_k)
+    c_n0 = np.broadcast_to(np.asarray(c_n0_mol_m3, dtype=float), (n_sets,))
+    c_p0 = np.broadcast_to(np.asarray(c_p0_mol_m3, dtype=float), (n_sets,))
+    y_n = np.outer(c_n0 / model.blocks[0].scale_mol_m3, np.ones(model.blocks[0].b_vector_per_a_s.size))
+    y_p = np.outer(c_p0 / model.blocks[1].scale_mol_m3, np.ones(model.blocks[1].b_vector_per_a_s.size))
+    z0 = modal.modal_state(y_n, y_p)
+    surfaces, checkpoints, z_end = boundary_surfaces(batch.lam, batch.drive, z0, duration_s, current,
+                                                     modal.surface_weights, stride=stride, backend=backend)
+    start_v = _voltage(model, batch, surfaces[:, :-1], current[None, :])
+    end_v = _voltage(model, batch, surfaces[:, 1:], current[None, :])
+    if not (np.all(np.isfinite(start_v)) and np.all(np.isfinite(end_v))):
+        raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
+    edges = np.concatenate([[0.0], np.cumsum(duration_s)])
+    cut = model.lower_cutoff_v
+    below = (start_v < cut) | (end_v < cut)
+    any_below = below.any(axis=1)
+    cutoff_step = np.where(any_below, below.argmax(axis=1), duration_s.size)
+    end_time = np.full(n_sets, edges[-1])
+    at_start = any_below & (start_v[np.arange(n_sets), np.minimum(cutoff_step, duration_s.size - 1)] < cut)
+    end_time[at_start] = edges[cutoff_step[at_start]]
+    inside = np.nonzero(any_below & ~at_start)[0]
+    if inside.size:
+        z_k = states_at(batch.lam[inside], batch.drive[inside], checkpoints[inside], duration_s, current,
+                        cutoff_step[inside], stride)
+        tau = _cutoff_in_step(model, modal, _take(batch, inside), z_k, duration_s[cutoff_step[inside]],
+                              current[cutoff_step[inside]])
+        end_time[inside] = edges[cutoff_step[inside]] + tau
+    cols = np.arange(duration_s.size)[None, :]
+    first_gone = cutoff_step + np.where(at_start, 0, 1)  # the cut-off step's start is kept when above the cut-off
+    start_v = np.where(cols >= first_gone[:, None], np.nan, start_v)
+    end_v = np.where(cols >= cutoff_step[:, None], np.nan, end_v)
+    extra = {"checkpoints": checkpoints, "stride": stride, "z_end": z_end, "lam": batch.lam, "drive": batch.drive,
+             "batch": batch}
+    return CellRuns(step_start_s=edges[:-1], start_voltage_v=start_v, end_voltage_v=end_v, end_time_s=end_time,
+                    reached_cutoff=any_below, cutoff_step=cutoff_step, extra=extra)
+
+
+def _take(batch: _Batch, idx: np.ndarray) -> _Batch:
+    return _Batch(*(getattr(batch, name)[idx] for name in batch.__dataclass_fields__))
+
+
+def _within_step(modal: ModalSystem, batch: _Batch, z_k: np.ndarray, tau_s: np.ndarray, current_a: np.ndarray):
+    """Surface values (n, 2) at ``tau_s`` into the step from modal states ``z_k`` (n, n_modes)."""
+    decay, phi = step_coefficients(batch.lam, tau_s[:, None])
+    z = decay * z_k + phi * batch.drive * current_a[:, None]
+    return z @ modal.surface_weights.T
+
+
+def _cutoff_in_step(model: LinearSpm, modal: ModalSystem, batch: _Batch, z_k: np.ndarray, h_s: np.ndarray,
+                    current_a: np.ndarray) -> np.ndarray:
+    """Time into the step (s) at which the voltage meets the cut-off (Illinois regula falsi, vectorised)."""
+    cut = model.lower_cutoff_v
+
+    def f(tau):
+        s = _within_step(modal, batch, z_k, tau, current_a)
+        return model.cell_voltage_v(s[:, 0], s[:, 1], current_a, batch.temperature_k, batch.eps_n, batch.eps_p,
+                                    batch.height_m) - cut
+
+    lo, hi = np.zeros_like(h_s), h_s.copy()
+    f_lo, f_hi = f(lo), f(hi)
+    side = np.zeros(h_s.size, dtype=int)
+    for _ in range(_MAX_ROOT_ITERATIONS):
+        if np.all(hi - lo <= CUTOFF_TIME_TOL_S):
+            break
+        mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+        mid = np.where(np.isfinite(mid) & (mid > lo) & (mid < hi), mid, 0.5 * (lo + hi))
+        f_mid = f(mid)
+        upper = f_mid < 0.0  # the root lies below mid
+        hi = np.where(upper, mid, hi)
+        lo = np.where(upper, lo, mid)
+        f_hi_new = np.where(upper, f_mid, np.where(side == -1, 0.5 * f_hi, f_hi))
+        f_lo_new = np.where(upper, np.where(side == 1, 0.5 * f_lo, f_lo), f_mid)
+        side = np.where(upper, 1, -1)
+        f_hi, f_lo = f_hi_new, f_lo_new
+        done = np.abs(f_mid) < 1e-13
+        lo = np.where(done, mid, lo)
+        hi = np.where(done, mid, hi)
+    return 0.5 * (lo + hi)
+
+
+def states_at_times(runs: CellRuns, modal: ModalSystem, duration_s, cell_current_a, time_s) -> np.ndarray:
+    """Surface values (n_sets, n_times, 2) at ``time_s`` (right-continuous), from a run with ``stride`` 1."""
+    if runs.extra["stride"] != 1:
+        raise SimulationError("states at arbitrary times need a run that kept every state (stride 1)")
+    duration_s = np.asarray(duration_s, dtype=float)
+    current = np.asarray(cell_current_a, dtype=float)
+    time_s = np.asarray(time_s, dtype=float)
+    step = np.clip(np.searchsorted(runs.step_start_s, time_s, side="right") - 1, 0, duration_s.size - 1)
+    tau = time_s - runs.step_start_s[step]
+    z_start = runs.extra["checkpoints"][:, step]  # (n_sets, n_times, n_modes)
+    lam = runs.extra["lam"][:, None, :]
+    drive = runs.extra["drive"][:, None, :]
+    decay, phi = step_coefficients(lam, tau[None, :, None])
+    z = decay * z_start + phi * drive * current[step][None, :, None]
+    return z @ modal.surface_weights.T
+
+
+def voltages_at_times(model: LinearSpm, runs: CellRuns, modal: ModalSystem, duration_s, cell_current_a,
+                      time_s) -> np.ndarray:
+    """Cell voltage (V, n_sets x n_times) at ``time_s`` under the current in force there (right-continuous)."""
+    surfaces = states_at_times(runs, modal, duration_s, cell_current_a, time_s)
+    step = np.clip(np.searchsorted(runs.step_start_s, np.asarray(time_s, float), side="right") - 1, 0,
+                   np.size(duration_s) - 1)
+    return _voltage(model, runs.extra["batch"], surfaces, np.asarray(cell_current_a, float)[step][None, :])

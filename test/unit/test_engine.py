@@ -1,0 +1,193 @@
+"""The SPM engine: PyBaMM's discretised SPM, exact stepping, cut-off, parameter-set scaling, pack voltage."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from battery_predictor.errors import SimulationError
+from battery_predictor.simulation.engine import pack_voltage_v, series_resistance_factor
+from battery_predictor.simulation.engine.modal import boundary_surfaces, modal_system
+from battery_predictor.simulation.engine.model import (
+    C_N0,
+    C_P0,
+    CURRENT,
+    EPS_N,
+    EPS_P,
+    HEIGHT,
+    INPUT_KEYS,
+    T_AMB,
+    _built_simulation,
+    extract_linear_spm,
+)
+from battery_predictor.simulation.engine.run import ParameterSets, run_cells
+
+
+@pytest.fixture(scope="module")
+def temi_spm(temi_params):
+    model = extract_linear_spm(temi_params)
+    return model, modal_system(model)
+
+
+def _uniform_state(model):
+    return model.initial_state(model.built_values[C_N0], model.built_values[C_P0])
+
+
+def test_particle_blocks_reproduce_pybamm_rhs_at_random_states(temi_params, temi_spm):
+    model, _ = temi_spm
+    built, values, _ = _built_simulation(temi_params)
+    rng = np.random.default_rng(1)
+    y = rng.uniform(0.2, 0.8, (built.concatenated_rhs.shape[0], 1))
+    inputs = {key: values[key] for key in INPUT_KEYS}
+    inputs[CURRENT] = 2.5
+    for block in model.blocks:
+        var = next(v for v in built.y_slices if v.name.startswith(f"X-averaged {block.electrode} particle conc"))
+        want = np.asarray(built.rhs[var].evaluate(0.0, y, inputs=inputs)).ravel()
+        got = block.a_matrix_per_s @ y[block.state_slice, 0] + block.b_vector_per_a_s * 2.5
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+
+
+def test_voltage_function_equals_pybamm_voltage_at_random_states(temi_params, temi_spm):
+    model, _ = temi_spm
+    built, values, _ = _built_simulation(temi_params)
+    rng = np.random.default_rng(2)
+    inputs = {key: values[key] for key in INPUT_KEYS}
+    for current_a in (-3.0, 0.0, 4.0):
+        y = rng.uniform(0.3, 0.8, (built.concatenated_rhs.shape[0], 1))
+        inputs[CURRENT] = current_a
+        want = float(built.variables["Voltage [V]"].evaluate(0.0, y, inputs=inputs).ravel()[0])
+        s_n, s_p = (blk.surface_row @ y[blk.state_slice, 0] for blk in model.blocks)
+        got = float(model.cell_voltage_v(s_n, s_p, current_a, values[T_AMB]))
+        assert got == pytest.approx(want, abs=1e-12)
+
+
+def test_modal_zero_order_hold_equals_matrix_exponential(temi_spm):
+    model, modal = temi_spm
+    rng = np.random.default_rng(3)
+    duration_s = rng.uniform(0.5, 30.0, 40)
+    current_a = rng.uniform(-2.0, 4.0, 40)
+    y_n, y_p = _uniform_state(model)
+    z0 = modal.modal_state(y_n, y_p)
+    surfaces, _, _ = boundary_surfaces(modal.eigenvalues_per_s[None], modal.input_per_a_s[None], z0, duration_s,
+                                       current_a, modal.surface_weights, backend="numpy")
+    for k, (block, y) in enumerate(zip(model.blocks, (y_n, y_p))):
+        n = y.size
+        aug = np.zeros((n + 1, n + 1))
+        aug[:n, :n] = block.a_matrix_per_s
+        aug[:n, n] = block.b_vector_per_a_s
+        state = y.copy()
+        for h, i in zip(duration_s, current_a):
+            step = scipy.linalg.expm(aug * h)
+            state = step[:n, :n] @ state + step[:n, n] * i
+        assert surfaces[0, -1, k] == pytest.approx(block.surface_row @ state, rel=1e-11)
+
+
+def test_uniform_and_varying_step_paths_agree(temi_spm):
+    model, modal = temi_spm
+    y_n, y_p = _uniform_state(model)
+    z0 = modal.modal_state(y_n, y_p)
+    current_a = np.random.default_rng(4).uniform(0.0, 3.0, 200)
+    args = (modal.eigenvalues_per_s[None], modal.input_per_a_s[None], z0)
+    uniform, _, _ = boundary_surfaces(*args, np.full(200, 5.0), current_a, modal.surface_weights, backend="numpy")
+    halves = np.repeat(current_a, 2)
+    split, _, _ = boundary_surfaces(*args, np.full(400, 2.5), halves, modal.surface_weights, backend="numpy")
+    split_two, _, _ = boundary_surfaces(np.repeat(args[0], 2, axis=0), np.repeat(args[1], 2, axis=0),
+                                        np.repeat(z0, 2, axis=0), np.full(400, 2.5), halves, modal.surface_weights,
+                                        backend="numpy")
+    np.testing.assert_allclose(uniform[0], split[0, ::2], rtol=1e-12)
+    np.testing.assert_allclose(split_two[1], split[0], rtol=1e-12)
+
+
+def test_numba_and_numpy_backends_agree(temi_spm):
+    pytest.importorskip("numba")
+    model, modal = temi_spm
+    y_n, y_p = _uniform_state(model)
+    z0 = np.repeat(modal.modal_state(y_n, y_p), 3, axis=0)
+    lam = modal.eigenvalues_per_s[None] * np.array([[1.0], [0.8], [1.3]])
+    drive = np.repeat(modal.input_per_a_s[None], 3, axis=0)
+    rng = np.random.default_rng(5)
+    duration_s, current_a = rng.uniform(1.0, 10.0, 300), rng.uniform(-1.0, 3.0, 300)
+    a = boundary_surfaces(lam, drive, z0, duration_s, current_a, modal.surface_weights, stride=7, backend="numpy")
+    b = boundary_surfaces(lam, drive, z0, duration_s, current_a, modal.surface_weights, stride=7, backend="numba")
+    for x, y in zip(a, b):
+        np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-15)
+
+
+def test_run_ends_where_the_voltage_meets_the_cutoff(temi_spm):
+    model, modal = temi_spm
+    x0_stoich = 0.06  # a nearly empty negative electrode: the cut-off comes within the hour
+    c_n0 = x0_stoich * model.blocks[0].scale_mol_m3
+    c_p0 = model.built_values[C_P0] + (model.built_values[C_N0] - c_n0) * 0.5
+    runs = run_cells(model, modal, np.full(720, 5.0), np.full(720, 2.0), c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
+                     temperature_k=298.15, stride=1)
+    assert runs.reached_cutoff[0]
+    step = int(runs.cutoff_step[0])
+    assert runs.start_voltage_v[0, step] >= model.lower_cutoff_v
+    assert 5.0 * step < runs.end_time_s[0] < 5.0 * (step + 1)
+    from battery_predictor.simulation.engine.run import voltages_at_times
+
+    v_end = voltages_at_times(model, runs, modal, np.full(720, 5.0), np.full(720, 2.0), runs.end_time_s)
+    assert v_end[0, 0] == pytest.approx(model.lower_cutoff_v, abs=1e-8)
+    assert np.all(np.isnan(runs.end_voltage_v[0, step:]))
+
+
+def test_batched_sets_equal_single_runs(temi_spm):
+    model, modal = temi_spm
+    sets = ParameterSets(radius_n=np.array([1.0, 0.8, 1.2]), diffusivity_p=np.array([1.0, 1.3, 0.7]),
+                         fraction_p=np.array([1.0, 0.9, 1.1]), height=np.array([1.0, 1.05, 0.95]))
+    current_a = np.random.default_rng(6).uniform(0.0, 4.0, 300)
+    common = dict(c_n0_mol_m3=model.built_values[C_N0], c_p0_mol_m3=model.built_values[C_P0], temperature_k=298.15)
+    batch = run_cells(model, modal, np.full(300, 5.0), current_a, sets=sets, **common)
+    for k in range(3):
+        one = ParameterSets(**{key: np.asarray(v)[k] if np.size(v) > 1 else v for key, v in vars(sets).items()})
+        single = run_cells(model, modal, np.full(300, 5.0), current_a, sets=one, **common)
+        np.testing.assert_allclose(batch.start_voltage_v[k], single.start_voltage_v[0], rtol=1e-12)
+
+
+@pytest.mark.parametrize("changes, factors", [
+    ({"Negative particle radius [m]": 0.8, "Positive particle diffusivity [m2.s-1]": 1.3},
+     {"radius_n": 0.8, "diffusivity_p": 1.3}),
+    ({"Negative electrode thickness [m]": 1.15, "Positive electrode active material volume fraction": 0.9,
+      "Electrode height [m]": 1.1, "Positive particle radius [m]": 1.2},
+     {"thickness_n": 1.15, "fraction_p": 0.9, "height": 1.1, "radius_p": 1.2}),
+])
+def test_parameter_set_factors_match_a_pybamm_rebuild(temi_params, temi_spm, changes, factors):
+    model, modal = temi_spm
+    pv = temi_params.parameter_values()
+    rebuilt_params = temi_params.with_values({k: float(pv[k]) * f for k, f in changes.items()})
+    rebuilt = extract_linear_spm(rebuilt_params)
+    current_a = np.random.default_rng(7).uniform(0.0, 4.0, 120)
+    common = dict(c_n0_mol_m3=model.built_values[C_N0], c_p0_mol_m3=model.built_values[C_P0], temperature_k=298.15)
+    scaled = run_cells(model, modal, np.full(120, 10.0), current_a, sets=ParameterSets(**factors), **common)
+    direct = run_cells(rebuilt, modal_system(rebuilt), np.full(120, 10.0), current_a, **common)
+    np.testing.assert_allclose(scaled.start_voltage_v, direct.start_voltage_v, rtol=0, atol=1e-9)
+
+
+def test_engine_refuses_a_model_it_does_not_cover(temi_params):
+    with pytest.raises(SimulationError, match="isothermal SPM"):
+        extract_linear_spm(temi_params.with_values({}, extensions=("temperature",)))
+
+
+def test_pack_voltage_is_series_cells_minus_interconnect_drop():
+    v = pack_voltage_v(np.array([3.6, 3.5]), np.array([10.0, 0.0]), series=4, r_eq_ohm=0.02)
+    np.testing.assert_allclose(v, [4 * 3.6 - 0.2, 4 * 3.5])
+
+
+def test_pack_voltage_with_a_weak_group_replaces_one_group():
+    v = pack_voltage_v(3.6, 5.0, series=4, r_eq_ohm=0.01, weak_cell_voltage_v=3.4)
+    assert v == pytest.approx(3 * 3.6 + 3.4 - 0.05)
+
+
+def test_series_resistance_rises_when_cold_and_is_unchanged_at_reference():
+    factor = series_resistance_factor(np.array([298.15, 273.15]), 20000.0)
+    assert factor[0] == pytest.approx(1.0)
+    assert factor[1] == pytest.approx(np.exp(20000.0 / 8.314462618 * (1 / 273.15 - 1 / 298.15)))
+    assert series_resistance_factor(250.0, 0.0) == pytest.approx(1.0)
+
+
+def test_eps_and_height_inputs_are_the_built_values(temi_params, temi_spm):
+    model, _ = temi_spm
+    pv = temi_params.parameter_values()
+    for key in (EPS_N, EPS_P, HEIGHT):
+        assert model.built_values[key] == pytest.approx(float(pv[key]))
