@@ -300,8 +300,8 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
     Raises
     ------
     ParamsError
-        On an unknown key, a key without a unit, a wrong type or an impossible value;
-        the message names ``source`` and the key.
+        On an unknown key, a key without a unit, a wrong type or a physically impossible value
+        (:func:`battery_predictor.params_checks.check_physical`); the message names ``source`` and the key.
     """
     if not isinstance(data, Mapping):
         raise ParamsError(f"{source}: top level must be a mapping")
@@ -406,7 +406,7 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
     if not isinstance(provenance, Mapping):
         raise ParamsError(f"{source}: key 'provenance' must be a mapping")
 
-    return PackParams(
+    params = PackParams(
         name=name,
         description=str(data.get("description") or ""),
         series=int(pack["series"]),
@@ -426,6 +426,10 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
         provenance=dict(provenance),
         source=source,
     )
+    from battery_predictor.params_checks import check_physical
+
+    check_physical(params)
+    return params
 
 
 def load_params(path: str | Path) -> PackParams:
@@ -437,6 +441,8 @@ def load_params(path: str | Path) -> PackParams:
         Missing file, YAML syntax error, or any validation problem (message names the file and key).
     """
     path = Path(path)
+    if path.is_dir():
+        raise ParamsError(f"{path}: is a directory, expected a params YAML file such as params/temi.yaml")
     if not path.is_file():
         raise ParamsError(f"{path}: params file not found")
     try:

@@ -12,8 +12,13 @@ from battery_predictor.errors import ParamsError
 NODE_NAMES = ("battery_monitor", "predictor")
 
 
-def check_node_params_file(path: str) -> Path:
-    """A readable ``node_name: ros__parameters:`` YAML; a clear error for a pack params file or a typo'd layout."""
+def check_node_params_file(path: str, *, pack: str | None = None) -> Path:
+    """A readable ``node_name: ros__parameters:`` YAML whose settings fit the pack it names.
+
+    Clear errors for a pack params file, a typo'd layout, a pack params file that cannot be
+    found (``predictor.params_file``, or ``pack`` when given), and node settings that contradict
+    the pack (:func:`check_nodes_against_pack`).
+    """
     p = Path(path)
     if not p.is_file():
         raise ParamsError(f"{p}: node params file not found")
@@ -32,4 +37,44 @@ def check_node_params_file(path: str) -> Path:
             raise ParamsError(f"{p}: unknown node '{name}' (expected {', '.join(NODE_NAMES)} or /**)")
         if not isinstance(section, dict) or "ros__parameters" not in section:
             raise ParamsError(f"{p}: '{name}' has no ros__parameters section")
+    check_nodes_against_pack(p, _node_parameters(data, "battery_monitor"), _node_parameters(data, "predictor"),
+                             pack=pack)
     return p
+
+
+def _node_parameters(data: dict, node: str) -> dict:
+    """The parameters a node gets from the file: ``/**`` first, then its own section."""
+    out: dict = {}
+    for name, section in data.items():
+        key = str(name).lstrip("/")
+        if key == "**" or key.split("/")[-1] == node:
+            out.update(section.get("ros__parameters") or {})
+    return out
+
+
+def check_nodes_against_pack(source: Path, monitor: dict, predictor: dict, *, pack: str | None = None) -> None:
+    """Raise :class:`ParamsError` when the nodes' settings cannot work with the pack the predictor loads.
+
+    The pack params file must load; the monitor's ``min_voltage_v..max_voltage_v`` must cover the pack's
+    voltage window; the predictor's non-zero ``cutoff_voltage_v`` and ``route_min_voltage_v`` must lie in it.
+    """
+    from battery_predictor.nodes._params import resolve_params_file
+    from battery_predictor.params import load_params
+    from battery_predictor.params_checks import check_monitor_range, check_voltage_in_window
+
+    name = pack or str(predictor.get("params_file", "") or "")
+    if not name:
+        return
+    resolved = Path(resolve_params_file(name))
+    if not resolved.is_file():
+        where = "--pack" if pack else f"{source}: predictor.params_file"
+        raise ParamsError(f"{where} {name!r}: pack params file not found (a path, or a bundled name such as "
+                          "temi.yaml)")
+    params = load_params(resolved)
+    if "min_voltage_v" in monitor or "max_voltage_v" in monitor:
+        check_monitor_range(float(monitor.get("min_voltage_v", 0.0)), float(monitor.get("max_voltage_v", 100.0)),
+                            params, str(source))
+    for key in ("cutoff_voltage_v", "route_min_voltage_v"):
+        value = float(predictor.get(key, 0.0) or 0.0)
+        if value:
+            check_voltage_in_window(f"predictor.{key}", value, params, source=str(source))

@@ -20,6 +20,7 @@ import json
 import math
 from typing import Any
 
+from battery_predictor.cli.common import add_input_check_arguments, check_output_file
 from battery_predictor.errors import InputDataError
 
 
@@ -59,16 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="metadata to store in the bag (VALUE parsed as JSON if possible); repeatable",
     )
     from_csv.add_argument("--overwrite", action="store_true", help="replace an existing bag")
-    from_csv.add_argument(
-        "--duplicate-times",
-        choices=("error", "keep_first", "keep_last"),
-        default="error",
-        help="rows with a repeated time_s (default: %(default)s)",
-    )
-    from_csv.add_argument("--drop-nan", action="store_true", help="drop rows with empty/NaN values")
-    from_csv.add_argument(
-        "--no-sign-check", action="store_true", help="skip the current-sign check (current_A > 0 = discharge)"
-    )
+    add_input_check_arguments(from_csv)
     from_csv.set_defaults(func=_cmd_from_csv)
 
     to_csv = sub.add_parser("to-csv", help="write a bag as time_s,voltage_V,current_A[,temperature_C] CSV")
@@ -148,7 +140,7 @@ def _cmd_from_csv(args: argparse.Namespace) -> int:
         topic_prefix=args.topic_prefix,
         metadata=_parse_meta(args.meta),
         overwrite=args.overwrite,
-        expect_discharge=not args.no_sign_check,
+        expect_discharge=args.expect_discharge,
         drop_nan=args.drop_nan,
         duplicate_times=args.duplicate_times,
     )
@@ -159,6 +151,7 @@ def _cmd_from_csv(args: argparse.Namespace) -> int:
 def _cmd_to_csv(args: argparse.Namespace) -> int:
     from battery_predictor.io.loader import bag_to_csv
 
+    check_output_file(args.csv, "CSV", suffixes=(".csv",), overwrite=True)
     path = bag_to_csv(args.bag, args.csv, topic=args.topic, drop_nan=args.drop_nan, overwrite=args.overwrite)
     print(f"wrote {path}")
     return 0

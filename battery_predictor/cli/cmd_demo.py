@@ -15,9 +15,11 @@ so the demo never talks to another ROS system. Takes about a minute.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import random
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
@@ -40,7 +42,8 @@ def register(sub) -> None:
     p.add_argument("--rate", type=float, default=0.0, help="replay rate (default 0: as fast as the nodes take it)")
     p.add_argument("--runtime-period", type=float, default=300.0,
                    help="predictor.runtime_period_s in the replay, bag seconds (default 300)")
-    p.add_argument("--out", default=None, help="directory for the output bag and plot (default: a temp dir)")
+    p.add_argument("--out", default=None,
+                   help="keep the output bag and plot in this directory (default: a temporary one, removed at the end)")
     p.set_defaults(func=run)
 
 
@@ -145,18 +148,32 @@ def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
     print("   reasons:\n     " + "\n     ".join(reasons))
 
 
+@contextlib.contextmanager
+def output_dir(out: str | None) -> Iterator[Path]:
+    """``--out`` checked and created, or a temporary directory removed when the demo ends."""
+    if out is None:
+        with tempfile.TemporaryDirectory(prefix="battery-predictor-demo-") as tmp:
+            yield Path(tmp)
+        return
+    from battery_predictor.cli.common import check_output_dir
+    from battery_predictor.errors import InputDataError
+
+    path = check_output_dir(out, "--out")
+    if (path / "temi_outputs").exists():
+        raise InputDataError(f"--out {path}: {path / 'temi_outputs'} exists (choose another --out)")
+    path.mkdir(parents=True, exist_ok=True)
+    yield path
+
+
 def run(args) -> int:
     temi_bag, ranger_bag = _bag(args.temi_bag), _bag(args.ranger_bag)
-    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="battery-predictor-demo-"))
-    out.mkdir(parents=True, exist_ok=True)
-    if (out / "temi_outputs").exists():
-        from battery_predictor.errors import InputDataError
-
-        raise InputDataError(f"{out / 'temi_outputs'}: exists (choose another --out)")
-    context = _isolated_context()
-    try:
-        _temi(context, temi_bag, out, args.rate, args.runtime_period)
-        _ranger(context, ranger_bag, args.ranger_at_min, args.rate)
-    finally:
-        context.try_shutdown()
+    with output_dir(args.out) as out:
+        context = _isolated_context()
+        try:
+            _temi(context, temi_bag, out, args.rate, args.runtime_period)
+            _ranger(context, ranger_bag, args.ranger_at_min, args.rate)
+        finally:
+            context.try_shutdown()
+    if args.out is None:
+        print("(the plot and node outputs were in a temporary directory, now removed; pass --out DIR to keep them)")
     return 0

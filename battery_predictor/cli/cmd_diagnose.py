@@ -6,7 +6,7 @@ import datetime as _dt
 import shlex
 import sys
 
-from battery_predictor.cli.common import print_json
+from battery_predictor.cli.common import add_input_check_arguments, check_output_dir, check_output_file, print_json
 
 
 def register(sub) -> None:
@@ -44,8 +44,7 @@ def register(sub) -> None:
                         "and charge phases, which separate some causes")
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
                    help="average every recording over time windows of SECONDS (dense data such as 1 s drive cycles)")
-    p.add_argument("--duplicate-times", choices=("error", "keep_first", "keep_last"), default="error",
-                   help="CSV rows that repeat a timestamp: reject (default) or keep one")
+    add_input_check_arguments(p)
     p.add_argument("--seed", type=int, default=0, help="seed of the multistart points (default 0)")
     p.add_argument("--workers", type=int, default=None,
                    help="processes for the candidate fits and the reference fit's Jacobian (default: CPUs, at most 4)")
@@ -53,11 +52,14 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _load(paths, args):
+def _load(paths, args, params):
     from battery_predictor.fitting.problem import trim_to_discharge
     from battery_predictor.io.loader import load_recording
+    from battery_predictor.params_checks import check_recordings_against_pack
 
-    recs = [load_recording(p, duplicate_times=args.duplicate_times) for p in paths]
+    recs = [load_recording(p, duplicate_times=args.duplicate_times, drop_nan=args.drop_nan,
+                           expect_discharge=None if args.expect_discharge else False) for p in paths]
+    check_recordings_against_pack(params, recs)
     if args.trim:
         recs = [trim_to_discharge(r) for r in recs]
     if args.resample:
@@ -76,9 +78,13 @@ def run(args) -> int:
     )
     from battery_predictor.params import load_params
 
+    if args.write_params:
+        check_output_file(args.write_params, "--write-params", suffixes=(".yaml", ".yml"))
+    if args.report:
+        check_output_dir(args.report, "--report")
     params = load_params(args.params)
-    observed = _load(args.data, args)
-    references = _load(args.reference, args) if args.reference else []
+    observed = _load(args.data, args, params)
+    references = _load(args.reference, args, params) if args.reference else []
     diag = diagnose(params, observed, references,
                     budget=args.budget or DEFAULT_BUDGET,
                     reference_budget=args.reference_budget or DEFAULT_REFERENCE_BUDGET,

@@ -6,7 +6,7 @@ import dataclasses
 import time
 from pathlib import Path
 
-from battery_predictor.cli.common import print_json
+from battery_predictor.cli.common import check_output_dir, print_json
 
 REPO = Path(__file__).resolve().parents[2]
 BASE_SETS = ("Chen2020", "NCA_Kim2011", "OKane2022")
@@ -64,7 +64,7 @@ def run(args) -> int:
 
     tic = time.perf_counter()
     bags = Path(args.bags)
-    out = Path(args.out)
+    out = check_output_dir(args.out, "--out")
     out.mkdir(parents=True, exist_ok=True)
     storage = None if args.storage == "memory" else (args.storage or f"sqlite:///{(out / 'studies.db').resolve()}")
     dyn_files = args.temi_dynamic or _bundled(bags, "temi_dynamic_*")

@@ -16,7 +16,7 @@ from __future__ import annotations
 import sys
 import time
 
-from battery_predictor.cli.common import print_json
+from battery_predictor.cli.common import check_output_dir, print_json
 
 
 def register(sub) -> None:
@@ -73,6 +73,7 @@ def _line(res) -> str:
 def run_make_bags(args) -> int:
     from battery_predictor.lab.experiments import make_bags
 
+    check_output_dir(args.out, "--out")
     tic = time.perf_counter()
 
     def progress(res) -> None:
@@ -94,6 +95,7 @@ def run_make_bags(args) -> int:
 def run_one(args) -> int:
     from battery_predictor.lab.experiments import find_experiments, run_experiment
 
+    check_output_dir(args.out, "--out")
     res = run_experiment(find_experiments([args.name])[0], args.out, params_dir=args.params_dir)
     if args.json:
         print_json(res)

@@ -21,6 +21,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from battery_predictor.cli.common import check_output_dir, check_output_file, check_plot_file
 from battery_predictor.errors import ProfileError
 from battery_predictor.jsonutil import json_default as _json_default
 from battery_predictor.profiles.load_profile import LoadProfile
@@ -100,7 +101,18 @@ def _add_output_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Every output path of ``_add_output_options`` is checked before the profile is made."""
+    if args.out is not None:
+        check_output_file(args.out, "--out", suffixes=(".csv",))
+    if args.plot is not None:
+        check_plot_file(args.plot)
+    if args.psu_dir is not None:
+        check_output_dir(args.psu_dir, "--psu-dir")
+
+
 def _cmd_temi(args: argparse.Namespace) -> int:
+    _check_outputs(args)
     if args.duration_h is None and args.charge_ah is None and args.points is None:
         raise ProfileError("profile temi: give --duration-h, --charge-ah or --points")
     config = load_usage_config(args.config)
@@ -115,6 +127,7 @@ def _cmd_temi(args: argparse.Namespace) -> int:
 
 
 def _cmd_route(args: argparse.Namespace) -> int:
+    _check_outputs(args)
     station = load_station(args.station)
     route = route_from_station(
         station, args.start, args.pickup, args.dropoff, args.payload_kg,
@@ -126,12 +139,14 @@ def _cmd_route(args: argparse.Namespace) -> int:
 
 
 def _cmd_longest(args: argparse.Namespace) -> int:
+    _check_outputs(args)
     currents = load_ranger_currents(args.currents)
     profile = route_profile(longest_route(args.payload_kg), currents, args.seed, args.point_duration_s, args.mode)
     return _emit("longest-route", profile, args)
 
 
 def _cmd_stepwise(args: argparse.Namespace) -> int:
+    _check_outputs(args)
     try:
         currents = [float(x) for x in args.currents_a.split(",") if x.strip()]
     except ValueError:

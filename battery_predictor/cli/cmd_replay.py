@@ -49,6 +49,7 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     import rclpy
 
     from battery_predictor.cli._ros_params import check_node_params_file
+    from battery_predictor.cli.common import check_output_dir
     from battery_predictor.errors import InputDataError
     from battery_predictor.nodes.replay_session import ReplaySession, default_output_dir
     from battery_predictor.replay import (
@@ -60,11 +61,11 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
         runtime_truth,
     )
 
-    check_node_params_file(params)
+    check_node_params_file(params, pack=pack)
     if not (rate >= 0 and not math.isnan(rate)):
         raise InputDataError(f"--rate is {rate} (must be >= 0)")
+    out = check_output_dir(out_dir or default_output_dir(bag), "--out")
     stream = read_replay_stream(bag)
-    out = Path(out_dir) if out_dir else default_output_dir(bag)
     bag_out, png = out / "outputs", out / "remaining_runtime.png"
     if bag_out.exists():
         if not overwrite:

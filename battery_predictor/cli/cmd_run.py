@@ -31,7 +31,7 @@ def ros_arguments(params: str, *, pack: str | None = None, use_sim_time: bool = 
     """The rclpy argument list for ``params`` (+ overrides)."""
     from battery_predictor.cli._ros_params import check_node_params_file
 
-    check_node_params_file(params)
+    check_node_params_file(params, pack=pack)
     args = ["battery-predictor", "--ros-args", "--params-file", str(params)]
     if pack:
         args += ["-p", f"predictor:params_file:={pack}"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from battery_predictor.cli.common import add_data_arguments, load_data, print_json
+from battery_predictor.cli.common import add_data_arguments, check_plot_file, data_options, load_data, print_json
 
 
 def register(sub) -> None:
@@ -25,9 +25,11 @@ def run(args) -> int:
     from battery_predictor.params import load_params
     from battery_predictor.simulation import get_simulator
 
+    if args.plot:
+        check_plot_file(args.plot)
     tic = time.perf_counter()
     params = load_params(args.params)
-    recs = load_data(args.data, trim=not args.no_trim, duplicate_times=args.duplicate_times)
+    recs = load_data(args.data, pack=params, **data_options(args))
     sim = get_simulator(args.simulator)
     rows, results = [], []
     for rec in recs:
@@ -59,7 +61,7 @@ def run(args) -> int:
     if args.plot:
         from battery_predictor.plots import plot_voltage_fit
 
-        plot_voltage_fit(recs, results, args.plot, title=f"{params.name}: R2_mod = {out['r2_mod']:.4f}")
+        out["plot"] = str(plot_voltage_fit(recs, results, args.plot, title=f"{params.name}: R2_mod = {out['r2_mod']:.4f}"))
     if args.json:
         print_json(out)
         return 0
@@ -69,4 +71,6 @@ def run(args) -> int:
               f"{r['runtime_s_measured'] / 60:.1f} min, simulated "
               f"{'n/a' if ts is None else f'{ts / 60:.1f} min'}")
     print(f"({args.simulator} simulator, {out['seconds']:.1f} s)")
+    if args.plot:
+        print(f"wrote {out['plot']}")
     return 0

@@ -4,19 +4,32 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
+from battery_predictor.errors import InputDataError
+from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording
 
 
-def load_data(paths: Sequence[str], *, trim: bool = True, duplicate_times: str = "error") -> list[Recording]:
-    """Load recordings (CSV or bag); trimmed to their discharge unless ``trim`` is False."""
+def load_data(paths: Sequence[str], *, trim: bool = True, duplicate_times: str = "error", drop_nan: bool = False,
+              expect_discharge: bool = True, pack: PackParams | None = None) -> list[Recording]:
+    """Load recordings (CSV or bag); trimmed to their discharge unless ``trim`` is False.
+
+    With ``pack``, each recording's voltage must be plausible for that pack
+    (:func:`battery_predictor.params_checks.check_recordings_against_pack`).
+    """
     from battery_predictor.fitting.problem import trim_to_discharge
     from battery_predictor.io.loader import load_recording
+    from battery_predictor.params_checks import check_recordings_against_pack
 
-    recs = [load_recording(p, duplicate_times=duplicate_times) for p in paths]
+    recs = [load_recording(p, duplicate_times=duplicate_times, drop_nan=drop_nan,
+                           expect_discharge=None if expect_discharge else False) for p in paths]
+    if pack is not None:
+        check_recordings_against_pack(pack, recs)
     return [trim_to_discharge(r) for r in recs] if trim else recs
 
 
@@ -36,11 +49,84 @@ def print_json(obj: dict[str, Any]) -> None:
     sys.stdout.flush()
 
 
+def add_input_check_arguments(parser) -> None:
+    """``--duplicate-times``, ``--drop-nan`` and ``--no-sign-check``: the ways out of the input checks."""
+    parser.add_argument("--duplicate-times", choices=("error", "keep_first", "keep_last"), default="error",
+                        help="CSV rows that repeat a timestamp: reject (default) or keep one")
+    parser.add_argument("--drop-nan", action="store_true",
+                        help="drop rows with an empty/NaN time, voltage or current (fill temperature gaps)")
+    parser.add_argument("--no-sign-check", dest="expect_discharge", action="store_false",
+                        help="skip the current-sign check (current_A > 0 = discharge)")
+
+
+def data_options(args) -> dict[str, Any]:
+    """The :func:`load_data` options of a command that used :func:`add_data_arguments`."""
+    return {"trim": not args.no_trim, "duplicate_times": args.duplicate_times, "drop_nan": args.drop_nan,
+            "expect_discharge": args.expect_discharge}
+
+
 def add_data_arguments(parser) -> None:
-    """``--data FILE [FILE...]`` and ``--no-trim``."""
+    """``--data FILE [FILE...]``, ``--no-trim`` and :func:`add_input_check_arguments`."""
     parser.add_argument("--data", nargs="+", required=True, metavar="FILE",
                         help="CSV (time_s, voltage_V, current_A > 0 = discharge[, temperature_C]) or rosbag2 MCAP")
     parser.add_argument("--no-trim", action="store_true",
                         help="keep samples after the minimum voltage (rests, recharge)")
-    parser.add_argument("--duplicate-times", choices=("error", "keep_first", "keep_last"), default="error",
-                        help="CSV rows that repeat a timestamp: reject (default) or keep one")
+    add_input_check_arguments(parser)
+
+
+def _writable_parent(path: Path, option: str) -> None:
+    """Raise :class:`InputDataError` unless the nearest existing ancestor of ``path`` is a writable directory."""
+    parent = path.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise InputDataError(f"{option} {path}: {parent} is a file, not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputDataError(f"{option} {path}: cannot write into {parent} (permission denied)")
+
+
+def check_output_file(path: str | os.PathLike[str], option: str, *, suffixes: Sequence[str] = (),
+                      overwrite: bool = True) -> Path:
+    """Check before any work that ``path`` can be written as a file; returns it as a Path.
+
+    Raises :class:`InputDataError` (one line naming ``option``) when ``path`` is a directory, has a
+    suffix outside ``suffixes`` (when given), exists while ``overwrite`` is False, or lies below a
+    file or an unwritable directory.
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise InputDataError(f"{option} {p}: is a directory; give a file name such as "
+                             f"{p / ('out' + (suffixes[0] if suffixes else ''))}")
+    if suffixes and p.suffix.lower() not in suffixes:
+        raise InputDataError(f"{option} {p}: unsupported file type {p.suffix or '(no suffix)'!r}; use one of "
+                             f"{', '.join(suffixes)}")
+    if p.exists() and not overwrite:
+        raise InputDataError(f"{option} {p}: already exists")
+    _writable_parent(p, option)
+    return p
+
+
+def plot_suffixes() -> tuple[str, ...]:
+    """File suffixes matplotlib can write (``.png`` first)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    others = sorted(f".{ext}" for ext in FigureCanvasBase.get_supported_filetypes() if ext != "png")
+    return (".png", *others)
+
+
+def check_plot_file(path: str | os.PathLike[str], option: str = "--plot") -> Path:
+    """:func:`check_output_file` for a figure: the suffix must be one matplotlib writes."""
+    return check_output_file(path, option, suffixes=plot_suffixes())
+
+
+def check_output_dir(path: str | os.PathLike[str], option: str) -> Path:
+    """Check before any work that ``path`` can be (or is) a writable directory; returns it as a Path."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise InputDataError(f"{option} {p}: is a file, expected a directory")
+    if p.is_dir():
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise InputDataError(f"{option} {p}: cannot write into it (permission denied)")
+        return p
+    _writable_parent(p, option)
+    return p

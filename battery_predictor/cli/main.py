@@ -8,7 +8,7 @@ import os
 import sys
 import warnings
 
-from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.errors import BatteryPredictorError, cli_flags
 
 #: Sub-command modules, each with ``register(subparsers)``.
 COMMAND_MODULES = (
@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "battery_predictor.cli.cmd_run",
     "battery_predictor.cli.cmd_replay",
     "battery_predictor.cli.cmd_evaluate",
+    "battery_predictor.cli.cmd_evaluate_runtime",
     "battery_predictor.cli.cmd_diagnose",
     "battery_predictor.cli.cmd_demo",
 )
@@ -38,7 +39,38 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # sub-command not implemented in this build
             raise
         module.register(sub)
+    _record_flags(parser)
     return parser
+
+
+def flag_map(parser: argparse.ArgumentParser) -> dict[str, dict[object, str]]:
+    """The parser's flags per Python option name and value, for the hints of :func:`errors.option_hint`.
+
+    ``--drop-nan`` (store_true, dest ``drop_nan``) gives ``{"drop_nan": {True: "--drop-nan"}}``; a flag
+    with choices gives one entry per choice; any other flag taking a value gives ``{None: "--flag VALUE"}``.
+    """
+    out: dict[str, dict[object, str]] = {}
+    for action in parser._actions:  # argparse has no public accessor
+        if not action.option_strings or action.dest in ("help", argparse.SUPPRESS):
+            continue
+        flag = max(action.option_strings, key=len)
+        entry = out.setdefault(action.dest, {})
+        if isinstance(action, argparse._StoreConstAction):  # store_true / store_false
+            entry[action.const] = flag
+        elif action.choices:
+            entry.update({choice: f"{flag} {choice}" for choice in action.choices})
+        else:
+            entry[None] = f"{flag} {action.metavar or action.dest.upper()}"
+    return out
+
+
+def _record_flags(parser: argparse.ArgumentParser) -> None:
+    """Give every command's parser a ``cli_flags`` default: its own :func:`flag_map`."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                sub.set_defaults(cli_flags=flag_map(sub))
+                _record_flags(sub)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,7 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with cli_flags(getattr(args, "cli_flags", {})):
+            return int(args.func(args) or 0)
     except BatteryPredictorError as exc:
         print(f"battery-predictor: error: {exc}", file=sys.stderr)
         return 2

@@ -115,7 +115,7 @@ from battery_predictor.conventions import (
     internal_current_to_battery_state,
     kelvin_to_celsius,
 )
-from battery_predictor.errors import BagError, BatteryPredictorError, InputDataError
+from battery_predictor.errors import BagError, BatteryPredictorError, InputDataError, option_hint
 from battery_predictor.io.csv_io import check_current_sign, check_temperature_k, check_units
 from battery_predictor.jsonutil import json_default as _json_default
 from battery_predictor.recording import Recording
@@ -267,7 +267,7 @@ def write_recording_bag(
 
     if p.exists() or p.is_symlink():
         if not overwrite:
-            raise BagError(f"{p}: already exists; pass overwrite=True to replace it")
+            raise BagError(f"{p}: already exists" + option_hint("overwrite", True, "to replace it"))
         if not p.is_dir() or not _looks_like_bag_dir(p):
             raise BagError(f"{p}: exists and is not a bag directory; not overwriting it")
         shutil.rmtree(p)
@@ -547,7 +547,8 @@ def _select(p: Path, topics: dict[str, tuple[str, int]], topic: str | None) -> t
     if len(states) > 1:
         if DEFAULT_BATTERY_STATE_TOPIC in states:
             return "battery_state", DEFAULT_BATTERY_STATE_TOPIC
-        raise BagError(f"{p}: several {BATTERY_STATE_TYPE} topics ({', '.join(states)}); pass topic= to choose one")
+        raise BagError(f"{p}: several {BATTERY_STATE_TYPE} topics ({', '.join(states)})"
+                       + option_hint("topic", None, "to choose one"))
     prefixes = _relay_prefixes(topics)
     if len(prefixes) == 1:
         return "relay", prefixes[0]
@@ -555,7 +556,8 @@ def _select(p: Path, topics: dict[str, tuple[str, int]], topic: str | None) -> t
         if DEFAULT_RELAY_PREFIX in prefixes:
             return "relay", DEFAULT_RELAY_PREFIX
         raise BagError(
-            f"{p}: several relay topic groups ({', '.join(x + '/*' for x in prefixes)}); pass topic= to choose one"
+            f"{p}: several relay topic groups ({', '.join(x + '/*' for x in prefixes)})"
+            + option_hint("topic", None, "to choose one")
         )
     raise BagError(f"{p}: no supported battery topics ({supported}); {_describe(topics)}")
 
@@ -696,8 +698,8 @@ def read_recording_bag(
             k = int(np.argmax(bad))
             raise InputDataError(
                 f"{source}: {where}: sample {k} (stamp {int(ns[k])} ns) has an invalid voltage/current "
-                f"({v[k]!r} V, {i[k]!r} A: NaN, inf or voltage <= 0); {int(bad.sum())} such sample(s); "
-                "pass drop_nan=True to drop them"
+                f"({v[k]!r} V, {i[k]!r} A: NaN, inf or voltage <= 0); {int(bad.sum())} such sample(s)"
+                + option_hint("drop_nan", True, "to drop them")
             )
         extra_meta["dropped_nan_samples"] = int(bad.sum())
         ns, v, i, temp_c = ns[~bad], v[~bad], i[~bad], temp_c[~bad]
@@ -713,7 +715,8 @@ def read_recording_bag(
                 k = int(np.argmax(~finite_t))
                 raise InputDataError(
                     f"{source}: {where}: sample {k} has no temperature while others do "
-                    f"({int((~finite_t).sum())} such sample(s)); pass drop_nan=True to fill from the nearest sample"
+                    f"({int((~finite_t).sum())} such sample(s))"
+                    + option_hint("drop_nan", True, "to fill from the nearest sample")
                 )
             extra_meta["filled_temperature_samples"] = int((~finite_t).sum())
             good = np.flatnonzero(finite_t)

@@ -67,7 +67,7 @@ from typing import Any
 import numpy as np
 
 from battery_predictor.conventions import celsius_to_kelvin, kelvin_to_celsius
-from battery_predictor.errors import InputDataError
+from battery_predictor.errors import InputDataError, in_cli, option_hint
 from battery_predictor.recording import Recording
 
 #: Columns every measurement CSV must have.
@@ -310,8 +310,8 @@ def check_current_sign(time_s: np.ndarray, voltage_v: np.ndarray, current_a: np.
             f"{source}: current_A seems to use the wrong sign convention (net charge {charge_ah:+.4g} Ah, "
             f"{100 * negative_fraction:.0f} % of the non-zero samples negative, voltage-response score {score:+.2f}, "
             "where +1 means the voltage drops when current_A rises); current_A > 0 must mean DISCHARGE: "
-            "flip the sign of the column (sensor_msgs/BatteryState and many cyclers use negative = discharge), "
-            "or pass expect_discharge=False to skip this check"
+            "flip the sign of the column (sensor_msgs/BatteryState and many cyclers use negative = discharge)"
+            + option_hint("expect_discharge", False, "to skip this check")
         )
 
 
@@ -404,14 +404,14 @@ def _build(
         what = ", ".join(f"{c}={r.strip()!r}" for c, r in zip(cols, raw))
         raise InputDataError(
             f"{source}: {where(k)}: empty or non-finite value ({what}); "
-            f"{int(bad.sum())} such row(s); pass drop_nan=True to drop them"
+            f"{int(bad.sum())} such row(s)" + option_hint("drop_nan", True, "to drop them")
         )
     nonpositive = np.isfinite(v) & (v <= 0)
     if nonpositive.any() and not drop_nan:
         k = int(np.argmax(nonpositive))
         raise InputDataError(
             f"{source}: {where(k)}: voltage_V {v[k]!r} is not positive "
-            f"({int(nonpositive.sum())} such row(s)); pass drop_nan=True to drop them"
+            f"({int(nonpositive.sum())} such row(s))" + option_hint("drop_nan", True, "to drop them")
         )
     bad |= nonpositive
     if bad.any():
@@ -425,19 +425,8 @@ def _build(
     dt = np.diff(t)
     if (dt < 0).any() or ((dt == 0).any() and duplicate_times == "error"):
         k = int(np.argmax(dt <= 0)) + 1 if duplicate_times == "error" else int(np.argmax(dt < 0)) + 1
-        prev_line = table.lines[rows[k - 1] - 1]
-        if t[k] == t[k - 1]:
-            hint = ("repeated timestamp, common at step changes in cycler exports: duplicate_times='keep_last' "
-                    "(CLI: --duplicate-times keep_last) keeps the last row of each repeated time")
-        else:
-            hint = "time goes backwards"
-            group_like = [c for c in ("soc_label", "cell", "cycle", "step", "test", "record", "run") if c in table.index]
-            if group_like and "group" not in meta:
-                hint += f"; columns {', '.join(group_like)} suggest several records in one file: use load_csv_groups"
-        raise InputDataError(
-            f"{source}: {where(k)}: time_s {t[k]!r} is not greater than {t[k - 1]!r} on line {prev_line}; "
-            f"time_s must be strictly increasing ({hint})"
-        )
+        problem = _order_problem(table, t[k], t[k - 1], table.lines[rows[k - 1] - 1], meta)
+        raise InputDataError(f"{source}: {where(k)}: {problem}")
     if (dt == 0).any():
         same_next = np.append(dt == 0, False)  # row k has the same time as row k+1
         same_prev = np.insert(dt == 0, 0, False)  # row k has the same time as row k-1
@@ -457,8 +446,8 @@ def _build(
                     k = int(np.argmax(~finite))
                     raise InputDataError(
                         f"{source}: {where(k)}: column {temp_name!r} is empty or non-finite "
-                        f"({int((~finite).sum())} such row(s)); pass drop_nan=True to fill gaps from the nearest "
-                        "measured sample"
+                        f"({int((~finite).sum())} such row(s))"
+                        + option_hint("drop_nan", True, "to fill gaps from the nearest measured sample")
                     )
                 meta["filled_temperature_rows"] = int((~finite).sum())
                 temp = _fill_nearest(t, temp)
@@ -478,6 +467,21 @@ def _build(
         source=source,
         metadata=meta,
     )
+
+
+def _order_problem(table: _Table, t_now: float, t_prev: float, prev_line: int, meta: dict[str, Any]) -> str:
+    """Why ``time_s`` ``t_now`` may not follow ``t_prev`` (given on ``prev_line``), with the way out."""
+    if t_now == t_prev:
+        return (f"time_s {t_now!r} repeats the time of line {prev_line} (time_s must be strictly increasing; "
+                "repeated timestamps are common at step changes in cycler exports)"
+                + option_hint("duplicate_times", "keep_last", "to keep the last row of each repeated time"))
+    text = (f"time_s {t_now!r} is before {t_prev!r} on line {prev_line}: time goes backwards "
+            "(time_s must be strictly increasing)")
+    group_like = [c for c in ("soc_label", "cell", "cycle", "step", "test", "record", "run") if c in table.index]
+    if group_like and "group" not in meta:
+        split = "split the file by them" if in_cli() else "use load_csv_groups"
+        text += f"; columns {', '.join(group_like)} suggest several records in one file: {split}"
+    return text
 
 
 def _check_options(duplicate_times: str) -> None:
@@ -606,6 +610,13 @@ def load_csv_groups(
     return out
 
 
+def _default_file_mode() -> int:
+    """The mode ``open()`` gives a new file (0666 less the umask); ``mkstemp`` would leave 0600."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 def save_csv(recording: Recording, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
     """Write ``time_s,voltage_V,current_A[,temperature_C]`` (current positive = discharge).
 
@@ -619,7 +630,9 @@ def save_csv(recording: Recording, path: str | os.PathLike[str], *, overwrite: b
     """
     p = Path(path)
     if p.exists() and (p.is_dir() or not overwrite):
-        raise InputDataError(f"{p}: already exists; not overwriting")
+        if p.is_dir():
+            raise InputDataError(f"{p}: is a directory, expected a CSV file name")
+        raise InputDataError(f"{p}: already exists" + option_hint("overwrite", True, "to replace it"))
     if not p.parent.is_dir():
         raise InputDataError(f"{p}: directory {p.parent} does not exist")
     header = ["time_s", "voltage_V", "current_A"]
@@ -637,6 +650,7 @@ def save_csv(recording: Recording, path: str | os.PathLike[str], *, overwrite: b
             fh.write(",".join(header) + "\n")
             for values in zip(*(c.tolist() for c in cols)):
                 fh.write(",".join(fmt(x) for x in values) + "\n")
+        os.chmod(tmp, _default_file_mode())
         os.replace(tmp, p)
     except OSError as exc:
         Path(tmp).unlink(missing_ok=True)

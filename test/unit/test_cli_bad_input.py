@@ -1,0 +1,183 @@
+"""What a new user meets: impossible params, late failures, hints and messages, as the CLI prints them.
+
+Every error here is one line on stderr, exit code 2, no traceback, and names the flag, file or key.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from battery_predictor.cli.main import build_parser, flag_map
+from battery_predictor.errors import cli_flags, option_hint
+from battery_predictor.io.bags import read_recording_bag
+from battery_predictor.io.csv_io import save_csv
+
+REPO = Path(__file__).resolve().parents[2]
+CLI = str(Path(sys.executable).parent / "battery-predictor")
+TEMI = str(REPO / "params" / "temi.yaml")
+RANGER = str(REPO / "params" / "ranger_mini.yaml")
+TEMI_BAG = str(REPO / "bags" / "temi_dynamic_pack1")
+#: Python option names the input readers put into their hints (errors.option_hint).
+HINTED_OPTIONS = {"drop_nan": True, "expect_discharge": False, "duplicate_times": "keep_last", "overwrite": True,
+                  "topic": None}
+
+
+def _run(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
+    return subprocess.run([CLI, *args], capture_output=True, text=True, timeout=600, cwd=cwd)
+
+
+def _one_line_error(proc: subprocess.CompletedProcess, *fragments: str) -> str:
+    assert proc.returncode == 2, (proc.stdout, proc.stderr)
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+    return lines[0]
+
+
+def _params_with(tmp_path: Path, mutate, base: str = TEMI) -> str:
+    data = yaml.safe_load(Path(base).read_text())
+    mutate(data)
+    path = tmp_path / "changed.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def short_csv(tmp_path_factory) -> Path:
+    """The first ~30 min of the bundled temi recording as CSV."""
+    rec = read_recording_bag(TEMI_BAG)
+    keep = rec.time_s <= 1800.0
+    from battery_predictor.recording import Recording
+
+    short = Recording(time_s=rec.time_s[keep], voltage_v=rec.voltage_v[keep], current_a=rec.current_a[keep],
+                      temperature_k=None if rec.temperature_k is None else rec.temperature_k[keep], source="short")
+    return save_csv(short, tmp_path_factory.mktemp("data") / "short.csv")
+
+
+def _csv(tmp_path: Path, body: str, name: str = "data.csv") -> str:
+    path = tmp_path / name
+    path.write_text("time_s,voltage_V,current_A\n" + body)
+    return str(path)
+
+
+# ---------------------------------------------------------------- 1. physically impossible params
+@pytest.mark.parametrize(("mutate", "fragments"), [
+    (lambda d: d["pack"].update(nominal_capacity_ah=-14.70), ("pack.nominal_capacity_ah", "-14.7")),
+    (lambda d: d["cell"]["manual"].update({"Nominal cell capacity [A.h]": -2.45}),
+     ("Nominal cell capacity [A.h]", "must be > 0")),
+])
+def test_simulate_rejects_negative_capacities_before_simulating(tmp_path, short_csv, mutate, fragments):
+    path = _params_with(tmp_path, mutate)
+    _one_line_error(_run("simulate", "--params", path, "--data", str(short_csv)), "changed.yaml", *fragments)
+
+
+def test_screen_rejects_a_series_count_the_pack_voltages_contradict(tmp_path):
+    path = _params_with(tmp_path, lambda d: d["pack"].update(series=10000))
+    _one_line_error(_run("screen", "--params", path), "pack.series", "10000")
+
+
+def test_simulate_rejects_a_recording_of_another_pack(short_csv):
+    _one_line_error(_run("simulate", "--params", RANGER, "--data", str(short_csv)),
+                    "short.csv", "per cell", "not of this pack")
+
+
+def test_run_rejects_a_monitor_range_that_misses_the_pack(tmp_path):
+    nodes = yaml.safe_load((REPO / "params" / "ros" / "ranger_nodes.yaml").read_text())
+    nodes["predictor"]["ros__parameters"]["params_file"] = "temi.yaml"
+    path = tmp_path / "mixed_nodes.yaml"
+    path.write_text(yaml.safe_dump(nodes))
+    _one_line_error(_run("run", "--params", str(path)), "mixed_nodes.yaml", "37.5..58", "12..16.4")
+
+
+def test_run_rejects_a_missing_pack_file_before_starting_the_nodes():
+    _one_line_error(_run("run", "--params", "params/ros/temi_nodes.yaml", "--pack", "no_such_pack.yaml"),
+                    "--pack", "no_such_pack.yaml", "not found")
+
+
+# ------------------------------------------------------------------- 2. output paths checked first
+def test_fit_out_directory_fails_before_the_fit(tmp_path, short_csv):
+    _one_line_error(_run("fit", "--params", TEMI, "--data", str(short_csv), "--out", str(tmp_path)),
+                    "--out", "is a directory")
+
+
+def test_profile_plot_with_unknown_suffix_fails_before_the_profile(tmp_path):
+    _one_line_error(_run("profile", "temi", "--points", "5", "--plot", str(tmp_path / "x.xyz")),
+                    "--plot", "'.xyz'", ".png")
+    assert not (tmp_path / "x.xyz").exists()
+
+
+def test_simulate_plot_directory_fails_and_a_plot_file_is_reported(tmp_path, short_csv):
+    _one_line_error(_run("simulate", "--params", TEMI, "--data", str(short_csv), "--plot", str(tmp_path)),
+                    "--plot", "is a directory")
+    proc = _run("simulate", "--params", TEMI, "--data", str(short_csv), "--plot", str(tmp_path / "fit.png"))
+    assert proc.returncode == 0, proc.stderr
+    assert f"wrote {tmp_path / 'fit.png'}" in proc.stdout
+    assert (tmp_path / "fit.png").stat().st_size > 0
+
+
+# --------------------------------------------------------------------- 3. hints name real flags
+def test_every_hint_names_a_flag_of_the_command_that_prints_it():
+    def leaves(parser: argparse.ArgumentParser):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    if sub.get_default("func") is not None:
+                        yield sub
+                    yield from leaves(sub)
+
+    checked = 0
+    for parser in leaves(build_parser()):
+        flags = {s for a in parser._actions for s in a.option_strings}
+        with cli_flags(flag_map(parser)):
+            for option, value in HINTED_OPTIONS.items():
+                hint = option_hint(option, value, "to go on")
+                assert "=" not in hint, (parser.prog, hint)
+                if hint:
+                    assert hint.split()[2] in flags, (parser.prog, hint)
+                    checked += 1
+    assert checked >= 8
+
+
+def test_simulate_nan_row_hint_names_drop_nan_flag_that_works(tmp_path, short_csv):
+    lines = Path(short_csv).read_text().splitlines()
+    lines[5] = lines[5].split(",")[0] + ",nan," + ",".join(lines[5].split(",")[2:])
+    path = tmp_path / "nan.csv"
+    path.write_text("\n".join(lines) + "\n")
+    message = _one_line_error(_run("simulate", "--params", TEMI, "--data", str(path)), "line 6", "use --drop-nan")
+    assert "drop_nan" not in message
+    assert _run("simulate", "--params", TEMI, "--data", str(path), "--drop-nan", "--json").returncode == 0
+
+
+def test_wrong_current_sign_hint_names_no_sign_check(tmp_path):
+    body = "".join(f"{t},{16.0 - 0.01 * t},{-2.0}\n" for t in range(50))
+    message = _one_line_error(_run("fit", "--params", TEMI, "--data", _csv(tmp_path, body), "--out",
+                                   str(tmp_path / "f.yaml")), "use --no-sign-check")
+    assert "expect_discharge" not in message
+
+
+def test_bag_to_csv_twice_hints_overwrite_and_writes_readable_file(tmp_path):
+    out = tmp_path / "x.csv"
+    assert _run("bag", "to-csv", TEMI_BAG, str(out)).returncode == 0
+    assert out.stat().st_mode & 0o044 == 0o044  # group and others may read it, as any file the user writes
+    message = _one_line_error(_run("bag", "to-csv", TEMI_BAG, str(out)), "already exists", "use --overwrite")
+    assert "overwrite=" not in message
+
+
+# ------------------------------------------------------------------------ 4. misleading messages
+def test_params_directory_is_named_a_directory():
+    _one_line_error(_run("screen", "--params", "params"), "params", "is a directory")
+
+
+def test_repeated_timestamp_says_so_and_names_duplicate_times(tmp_path):
+    body = "0,16.0,2.0\n5,15.99,2.0\n5,15.98,2.0\n10,15.97,2.0\n"
+    message = _one_line_error(_run("diagnose", "--params", TEMI, "--data", _csv(tmp_path, body)),
+                              "repeats the time of line 3", "use --duplicate-times keep_last")
+    assert "not greater than" not in message
