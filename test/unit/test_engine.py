@@ -120,7 +120,7 @@ def test_run_ends_where_the_voltage_meets_the_cutoff(temi_spm):
     c_n0 = x0_stoich * model.blocks[0].scale_mol_m3
     c_p0 = model.built_values[C_P0] + (model.built_values[C_N0] - c_n0) * 0.5
     runs = run_cells(model, modal, np.full(720, 5.0), np.full(720, 2.0), c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
-                     temperature_k=298.15, stride=1)
+                     temperature_k=298.15, keep_states=True)
     assert runs.reached_cutoff[0]
     step = int(runs.cutoff_step[0])
     assert runs.start_voltage_v[0, step] >= model.lower_cutoff_v
@@ -191,3 +191,24 @@ def test_eps_and_height_inputs_are_the_built_values(temi_params, temi_spm):
     pv = temi_params.parameter_values()
     for key in (EPS_N, EPS_P, HEIGHT):
         assert model.built_values[key] == pytest.approx(float(pv[key]))
+
+
+def test_fused_kernel_matches_the_numpy_path_including_the_cutoff(temi_spm):
+    pytest.importorskip("numba")
+    model, modal = temi_spm
+    rng = np.random.default_rng(8)
+    duration_s = rng.choice([2.0, 5.0, 7.5], 900)
+    current_a = rng.uniform(0.0, 2.0, 900)
+    c_n0 = np.array([0.08, 0.3, 0.9]) * model.blocks[0].scale_mol_m3
+    c_p0 = model.built_values[C_P0] + (model.built_values[C_N0] - c_n0) * 0.5
+    sets = ParameterSets(radius_p=np.array([1.0, 1.1, 0.9]), fraction_n=np.array([1.0, 0.85, 1.15]))
+    common = dict(c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0, temperature_k=298.15, sets=sets)
+    fused = run_cells(model, modal, duration_s, current_a, backend="auto", **common)
+    plain = run_cells(model, modal, duration_s, current_a, backend="numpy", **common)
+    assert fused.extra["backend"] == "numba-fused"
+    assert plain.extra["backend"] == "numpy"
+    assert fused.reached_cutoff[0] and not fused.reached_cutoff[2]
+    np.testing.assert_array_equal(fused.cutoff_step, plain.cutoff_step)
+    np.testing.assert_allclose(fused.end_time_s, plain.end_time_s, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(fused.start_voltage_v, plain.start_voltage_v, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(fused.end_voltage_v, plain.end_voltage_v, rtol=0, atol=1e-10)

@@ -17,7 +17,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from battery_predictor.errors import SimulationError
-from battery_predictor.simulation.engine.modal import ModalSystem, boundary_surfaces, states_at, step_coefficients
+from battery_predictor.simulation.engine.kernel import PARALLEL_MIN_SETS, fused_kernel
+from battery_predictor.simulation.engine.modal import (
+    ModalSystem,
+    boundary_surfaces,
+    numba_available,
+    states_at,
+    step_coefficients,
+)
 from battery_predictor.simulation.engine.model import (
     EPS_N,
     EPS_P,
@@ -134,7 +141,7 @@ def _voltage(model: LinearSpm, batch: _Batch, surfaces: np.ndarray, current_a: n
 
 def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, *, c_n0_mol_m3, c_p0_mol_m3,
               temperature_k, sets: ParameterSets | None = None, backend: str = "auto",
-              stride: int = 64) -> CellRuns:
+              keep_states: bool = False) -> CellRuns:
     """Run cells from uniform particles through constant-current steps until the cut-off.
 
     Parameters
@@ -150,13 +157,15 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
     sets : ParameterSets, optional
         Cells that differ from the built one; None runs the built cell.
     backend : str
-        Recurrence backend: ``"auto"``, ``"numba"`` or ``"numpy"``.
-    stride : int
-        Modal states kept every ``stride`` steps (1 keeps all, for :func:`states_at_times`).
+        ``"auto"`` (the fused Numba kernel when available), ``"numba"`` or ``"numpy"``.
+    keep_states : bool
+        Keep the modal state at every step boundary (for :func:`voltages_at_times`); this runs the
+        recurrence and the voltage in two passes.
 
     Returns
     -------
     CellRuns
+        ``extra["backend"]`` names the path that ran: ``"numba-fused"``, ``"numba"`` or ``"numpy"``.
     """
     duration_s = np.asarray(duration_s, dtype=float)
     current = np.asarray(cell_current_a, dtype=float)
@@ -164,6 +173,8 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
         raise SimulationError("steps: durations and currents must be 1-D of equal non-zero length")
     if not (np.all(np.isfinite(duration_s)) and np.all(duration_s > 0) and np.all(np.isfinite(current))):
         raise SimulationError("steps: durations must be finite and > 0 s, currents finite")
+    if backend not in ("auto", "numba", "numpy"):
+        raise SimulationError(f"unknown engine backend '{backend}' (auto, numba or numpy)")
     sets = sets or ParameterSets()
     n_sets = max(sets.size(), np.size(c_n0_mol_m3), np.size(c_p0_mol_m3), np.size(temperature_k))
     batch = _batch(model, modal, sets, n_sets, temperature_k)
@@ -172,13 +183,45 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
     y_n = np.outer(c_n0 / model.blocks[0].scale_mol_m3, np.ones(model.blocks[0].b_vector_per_a_s.size))
     y_p = np.outer(c_p0 / model.blocks[1].scale_mol_m3, np.ones(model.blocks[1].b_vector_per_a_s.size))
     z0 = modal.modal_state(y_n, y_p)
+    edges = np.concatenate([[0.0], np.cumsum(duration_s)])
+    kernel = None if keep_states or backend == "numpy" else fused_kernel(model, parallel=n_sets >= PARALLEL_MIN_SETS)
+    if kernel is not None:
+        return _run_fused(kernel, model, modal, batch, z0, duration_s, current, edges)
+    return _run_two_pass(model, modal, batch, z0, duration_s, current, edges, backend,
+                         stride=1 if keep_states else 64)
+
+
+def _run_fused(kernel, model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.ndarray, duration_s: np.ndarray,
+               current: np.ndarray, edges: np.ndarray) -> CellRuns:
+    n_sets, n_steps = z0.shape[0], duration_s.size
+    start_v = np.full((n_sets, n_steps), np.nan)
+    end_v = np.full((n_sets, n_steps), np.nan)
+    end_time = np.empty(n_sets)
+    cutoff_step = np.empty(n_sets, dtype=np.int64)
+    at_start = np.empty(n_sets, dtype=np.bool_)
+    kernel(np.ascontiguousarray(batch.lam), np.ascontiguousarray(batch.drive), np.ascontiguousarray(z0), duration_s,
+           current, np.ascontiguousarray(modal.surface_weights), np.ascontiguousarray(batch.temperature_k),
+           np.ascontiguousarray(batch.eps_n), np.ascontiguousarray(batch.eps_p), np.ascontiguousarray(batch.height_m),
+           float(model.lower_cutoff_v), CUTOFF_TIME_TOL_S, start_v, end_v, end_time, cutoff_step, at_start)
+    if not np.all(np.isfinite(end_time)):
+        raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
+    ended_at_start = np.nonzero(at_start)[0]
+    start_v[ended_at_start, cutoff_step[ended_at_start]] = np.nan
+    return CellRuns(step_start_s=edges[:-1], start_voltage_v=start_v, end_voltage_v=end_v, end_time_s=end_time,
+                    reached_cutoff=cutoff_step < n_steps, cutoff_step=cutoff_step,
+                    extra={"backend": "numba-fused", "batch": batch})
+
+
+def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.ndarray, duration_s: np.ndarray,
+                  current: np.ndarray, edges: np.ndarray, backend: str, stride: int) -> CellRuns:
+    """States at every boundary (Numba or NumPy recurrence), then the voltage on all of them (NumPy)."""
+    n_sets = z0.shape[0]
     surfaces, checkpoints, z_end = boundary_surfaces(batch.lam, batch.drive, z0, duration_s, current,
                                                      modal.surface_weights, stride=stride, backend=backend)
     start_v = _voltage(model, batch, surfaces[:, :-1], current[None, :])
     end_v = _voltage(model, batch, surfaces[:, 1:], current[None, :])
     if not (np.all(np.isfinite(start_v)) and np.all(np.isfinite(end_v))):
         raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
-    edges = np.concatenate([[0.0], np.cumsum(duration_s)])
     cut = model.lower_cutoff_v
     below = (start_v < cut) | (end_v < cut)
     any_below = below.any(axis=1)
@@ -197,8 +240,9 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
     first_gone = cutoff_step + np.where(at_start, 0, 1)  # the cut-off step's start is kept when above the cut-off
     start_v = np.where(cols >= first_gone[:, None], np.nan, start_v)
     end_v = np.where(cols >= cutoff_step[:, None], np.nan, end_v)
+    used = "numpy" if backend == "numpy" or not numba_available() else "numba"
     extra = {"checkpoints": checkpoints, "stride": stride, "z_end": z_end, "lam": batch.lam, "drive": batch.drive,
-             "batch": batch}
+             "batch": batch, "backend": used}
     return CellRuns(step_start_s=edges[:-1], start_voltage_v=start_v, end_voltage_v=end_v, end_time_s=end_time,
                     reached_cutoff=any_below, cutoff_step=cutoff_step, extra=extra)
 
@@ -248,8 +292,8 @@ def _cutoff_in_step(model: LinearSpm, modal: ModalSystem, batch: _Batch, z_k: np
 
 def states_at_times(runs: CellRuns, modal: ModalSystem, duration_s, cell_current_a, time_s) -> np.ndarray:
     """Surface values (n_sets, n_times, 2) at ``time_s`` (right-continuous), from a run with ``stride`` 1."""
-    if runs.extra["stride"] != 1:
-        raise SimulationError("states at arbitrary times need a run that kept every state (stride 1)")
+    if runs.extra.get("stride") != 1:
+        raise SimulationError("states at arbitrary times need a run that kept every state (keep_states=True)")
     duration_s = np.asarray(duration_s, dtype=float)
     current = np.asarray(cell_current_a, dtype=float)
     time_s = np.asarray(time_s, dtype=float)

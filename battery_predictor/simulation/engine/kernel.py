@@ -1,0 +1,182 @@
+"""The fused compiled kernel: modal recurrence, voltage at every step and the cut-off root, per set.
+
+The cell voltage is PyBaMM's own expression (:attr:`LinearSpm.voltage_symbol`) turned into
+scalar code: PyBaMM's code printer (``pybamm.to_python``) writes it as NumPy statements on the
+rows of the voltage input array; the rows become scalar arguments and the NumPy functions
+their ``math`` counterparts, and Numba compiles the result together with the stepping loop.
+Expressions using anything else (interpolated data, constants arrays) have no compiled form;
+:func:`fused_kernel` then returns None and the caller uses the NumPy path.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import weakref
+
+import numpy as np
+
+from battery_predictor.simulation.engine.model import VOLTAGE_ROWS, LinearSpm
+
+#: NumPy functions of the printed voltage expression and their scalar replacements.
+_SCALAR_FUNCTIONS = {
+    "np.exp": "math.exp", "np.log": "math.log", "np.sqrt": "math.sqrt", "np.tanh": "math.tanh",
+    "np.arcsinh": "math.asinh", "np.sinh": "math.sinh", "np.cosh": "math.cosh", "np.arctan": "math.atan",
+    "np.abs": "abs", "np.minimum": "min", "np.maximum": "max",
+}
+_ROW = re.compile(r"y\[(\d+):(\d+)\]")
+_NP_CALL = re.compile(r"np\.\w+")
+#: Compiled kernels by (printed voltage source, parallel).
+_CACHE: dict[tuple[str, bool], object] = {}
+#: Printed voltage source by model (printing takes milliseconds).
+_SOURCES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: Batches of at least this many sets run in the parallel kernel.
+PARALLEL_MIN_SETS = 64
+
+
+def scalar_voltage_source(model: LinearSpm) -> str | None:
+    """Source of ``cell_voltage(y0, ..., y6)`` (scalar) from PyBaMM's printer, or None when unsupported."""
+    import pybamm
+
+    constants, body = pybamm.to_python(model.voltage_symbol, debug=False)
+    if constants:
+        return None
+    for call in set(_NP_CALL.findall(body)):
+        if call not in _SCALAR_FUNCTIONS:
+            return None
+    for a, b in _ROW.findall(body):
+        if int(b) != int(a) + 1 or int(a) >= len(VOLTAGE_ROWS):
+            return None
+    body = _ROW.sub(lambda m: f"y{m.group(1)}", body)
+    for call, scalar in _SCALAR_FUNCTIONS.items():
+        body = re.sub(re.escape(call) + r"\b", scalar, body)
+    if "[" in body or "@" in body:
+        return None
+    lines = [line for line in body.splitlines() if line.strip()]
+    result = lines[-1].split("=", 1)[0].strip()
+    args = ", ".join(f"y{k}" for k in range(len(VOLTAGE_ROWS)))
+    return f"def cell_voltage({args}):\n    " + "\n    ".join(lines) + f"\n    return {result}\n"
+
+
+def fused_kernel(model: LinearSpm, *, parallel: bool = False):
+    """The compiled run kernel for ``model``'s voltage, or None (no Numba, or no scalar form).
+
+    ``parallel`` selects the variant that spreads the sets over the cores (its compilation
+    takes several seconds, so single runs use the serial one).
+    """
+    try:
+        import numba
+    except ImportError:
+        return None
+    if model not in _SOURCES:
+        _SOURCES[model] = scalar_voltage_source(model) or ""
+    source = _SOURCES[model]
+    if not source:
+        return None
+    key = (source, bool(parallel))
+    if key not in _CACHE:
+        _CACHE[key] = _compile(numba, source, bool(parallel))
+    return _CACHE[key]
+
+
+def _compile(numba, source: str, parallel: bool):
+    namespace: dict = {"math": math}
+    exec(compile(source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - code printed by PyBaMM from the model
+    voltage = numba.njit(fastmath=False)(namespace["cell_voltage"])
+
+    @numba.njit(fastmath=False)
+    def within(z, lam, drive, weights, tau, current):  # pragma: no cover - compiled
+        sn = 0.0
+        sp = 0.0
+        for j in range(z.shape[0]):
+            x = lam[j] * tau
+            if lam[j] == 0.0:
+                zj = z[j] + tau * drive[j] * current
+            else:
+                zj = math.exp(x) * z[j] + math.expm1(x) / lam[j] * drive[j] * current
+            sn += weights[0, j] * zj
+            sp += weights[1, j] * zj
+        return sn, sp
+
+    @numba.njit(parallel=parallel, fastmath=False)
+    def kernel(lam, drive, z0, duration_s, current_a, weights, temperature_k, eps_n, eps_p, height_m, cutoff_v,
+               tol_s, start_v, end_v, end_time, cutoff_step, at_start):  # pragma: no cover - compiled
+        n_sets, n_modes = z0.shape
+        n_steps = duration_s.shape[0]
+        for s in numba.prange(n_sets):
+            z = z0[s].copy()
+            decay = np.empty(n_modes)
+            phid = np.empty(n_modes)
+            last_h = -1.0
+            t = 0.0
+            cutoff_step[s] = n_steps
+            at_start[s] = False
+            end_time[s] = 0.0
+            temp, en, ep, hh = temperature_k[s], eps_n[s], eps_p[s], height_m[s]
+            for k in range(n_steps):
+                h = duration_s[k]
+                i = current_a[k]
+                sn = 0.0
+                sp = 0.0
+                for j in range(n_modes):
+                    sn += weights[0, j] * z[j]
+                    sp += weights[1, j] * z[j]
+                v0 = voltage(sn, sp, i, temp, en, ep, hh)
+                start_v[s, k] = v0
+                if not v0 >= cutoff_v:
+                    cutoff_step[s] = k
+                    at_start[s] = True
+                    end_time[s] = t
+                    break
+                if h != last_h:
+                    for j in range(n_modes):
+                        x = lam[s, j] * h
+                        decay[j] = math.exp(x)
+                        if lam[s, j] == 0.0:
+                            phid[j] = h * drive[s, j]
+                        else:
+                            phid[j] = math.expm1(x) / lam[s, j] * drive[s, j]
+                    last_h = h
+                sn = 0.0
+                sp = 0.0
+                for j in range(n_modes):
+                    zj = decay[j] * z[j] + phid[j] * i
+                    sn += weights[0, j] * zj
+                    sp += weights[1, j] * zj
+                v1 = voltage(sn, sp, i, temp, en, ep, hh)
+                if not v1 >= cutoff_v:
+                    # root inside the step: Illinois regula falsi on the exact within-step solution
+                    lo, hi, f_lo, f_hi, side = 0.0, h, v0 - cutoff_v, v1 - cutoff_v, 0
+                    for _ in range(100):
+                        if hi - lo <= tol_s:
+                            break
+                        mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+                        if not (lo < mid < hi):
+                            mid = 0.5 * (lo + hi)
+                        a, b = within(z, lam[s], drive[s], weights, mid, i)
+                        f_mid = voltage(a, b, i, temp, en, ep, hh) - cutoff_v
+                        if f_mid == 0.0:
+                            lo = mid
+                            hi = mid
+                            break
+                        if f_mid < 0.0:
+                            hi, f_hi = mid, f_mid
+                            if side == -1:
+                                f_lo *= 0.5
+                            side = -1
+                        else:
+                            lo, f_lo = mid, f_mid
+                            if side == 1:
+                                f_hi *= 0.5
+                            side = 1
+                    cutoff_step[s] = k
+                    end_time[s] = t + 0.5 * (lo + hi)
+                    break
+                end_v[s, k] = v1
+                for j in range(n_modes):
+                    z[j] = decay[j] * z[j] + phid[j] * i
+                t += h
+            if cutoff_step[s] == n_steps:
+                end_time[s] = t
+
+    return kernel
