@@ -11,12 +11,20 @@ PYTEST_ARGS ?=
 
 setup: $(STAMP)
 
+# Each step's output goes to $(SETUP_LOG); the terminal gets one line per step (a bar on a TTY) and
+# the log's last lines when a step fails.
+SETUP_LOG := $(VENV)/setup.log
+STEP = $(PYTHON) tools/setup_step.py $(SETUP_LOG)
+PIP := $(VPY) -m pip install --disable-pip-version-check --progress-bar off
+PINNED := $(shell grep -c '==' constraints.txt)
+
 $(STAMP): requirements.txt constraints.txt setup.py setup.cfg package.xml tools/build_msgs.sh $(wildcard msg_defs/msg/*.msg) $(wildcard msg_defs/srv/*.srv) msg_defs/CMakeLists.txt msg_defs/package.xml
-	@test -x $(VPY) || $(PYTHON) -m venv $(VENV)
-	$(VPY) -m pip install --quiet --disable-pip-version-check --upgrade "pip>=24" "setuptools>=69,<80" wheel
-	$(VPY) -m pip install --quiet --disable-pip-version-check -r requirements.txt -c constraints.txt
-	bash tools/build_msgs.sh $(VENV)
-	$(VPY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+	@echo "setup: into $(VENV) (first run a few minutes; details in $(SETUP_LOG))"
+	@test -x $(VPY) || $(STEP) "creating the virtual environment" -- $(PYTHON) -m venv $(VENV)
+	@$(STEP) "updating pip and setuptools" -- $(PIP) --upgrade "pip>=24" "setuptools>=69,<80" wheel
+	@$(STEP) "installing $(PINNED) pinned packages" --total $(PINNED) -- $(PIP) -r requirements.txt -c constraints.txt
+	@$(STEP) "building the interface package msg_defs" -- bash tools/build_msgs.sh $(VENV)
+	@$(STEP) "installing battery_predictor (editable)" -- $(PIP) --no-deps --no-build-isolation -e .
 	@touch $(STAMP)
 	@echo "setup: ok ($(VENV))"
 

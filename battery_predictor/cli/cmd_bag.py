@@ -93,6 +93,24 @@ def _fmt(value: Any, unit: str = "", digits: int = 4) -> str:
     return f"{value}{unit}"
 
 
+#: Widest metadata value ``bag info`` prints; longer ones are summarised (``--json`` has them in full).
+META_VALUE_CHARS = 60
+
+
+def _short(value: Any) -> str:
+    """One metadata value in at most :data:`META_VALUE_CHARS` characters."""
+    text = json.dumps(value)
+    if len(text) <= META_VALUE_CHARS:
+        return text
+    if isinstance(value, dict):
+        keys = ", ".join(str(k) for k in value)
+        keys = keys if len(keys) <= META_VALUE_CHARS - 12 else keys[:META_VALUE_CHARS - 15] + "..."
+        return f"{{{len(value)} keys: {keys}}}"
+    if isinstance(value, list):
+        return f"[{len(value)} values]"
+    return text[:META_VALUE_CHARS - 3] + "..."
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     from battery_predictor.io.bags import bag_info
 
@@ -111,8 +129,10 @@ def _cmd_info(args: argparse.Namespace) -> int:
     width = max((len(t["name"]) for t in info["topics"]), default=0)
     lines += [f"  {t['name']:<{width}}  {t['type']}  x{t['count']}" for t in info["topics"]] or ["  (none)"]
     if info["metadata"]:
-        lines.append("metadata:")
-        lines += [f"  {k}: {json.dumps(v)}" for k, v in info["metadata"].items()]
+        lines.append("metadata:" + ("  (long values shortened; --json prints them in full)"
+                                    if any(len(json.dumps(v)) > META_VALUE_CHARS for v in info["metadata"].values())
+                                    else ""))
+        lines += [f"  {k}: {_short(v)}" for k, v in info["metadata"].items()]
     s = info["summary"]
     if s is None:
         lines.append(f"summary:      n/a ({info['summary_error']})")

@@ -69,6 +69,8 @@ def _isolated_context():
 
 
 def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -> None:
+    from battery_predictor.cli.common import bag_progress, bag_step, progress_wanted
+    from battery_predictor.io.paths import portable_paths
     from battery_predictor.nodes.replay_session import ReplaySession
     from battery_predictor.replay import (
         DEFAULT_CHECKPOINTS_MIN,
@@ -88,13 +90,15 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
     print(f"   {stream.style} topics, {len(stream.messages)} messages over {stream.duration_s / 60:.0f} min; "
           + (f"truth: {truth.stop_voltage_v:.2f} V reached after {truth.runtime_s / 60:.1f} min" if truth else
              "no runtime truth in this bag"), flush=True)
-    output = OutputBag(out / "temi_outputs", metadata={"replay_of": str(bag), "params": str(params)})
+    output = OutputBag(out / "temi_outputs", metadata=portable_paths({"replay_of": str(bag), "params": str(params)}))
     try:
         with ReplaySession(stream, context=context, params_file=str(params), rate=rate, out_bag=output,
                            predictor_overrides={"runtime_period_s": runtime_period_s}) as session:
             # the checkpoints (30..300 min, as the paper's 5.1.6) need the bag only up to the last one
             last_s = 60.0 * max(DEFAULT_CHECKPOINTS_MIN) + runtime_period_s
-            stats = session.play_until(stream.ros_time_ns(last_s) if truth and truth.runtime_s > last_s else None)
+            end_ns = stream.ros_time_ns(last_s) if truth and truth.runtime_s > last_s else None
+            with bag_progress(stream, end_ns, "   replay", enabled=progress_wanted()) as update:
+                stats = session.play_until(end_ns, on_step=bag_step(update, stream))
             session.flush()
             points = session.runtime_points()
             rejected = session.monitor.monitor.rejected_total
@@ -119,6 +123,7 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
 def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
     from battery_predictor_msgs.srv import CanAcceptRoute
 
+    from battery_predictor.cli.common import bag_progress, bag_step, progress_wanted
     from battery_predictor.nodes.messages import route_section_msgs
     from battery_predictor.nodes.replay_session import ReplaySession
     from battery_predictor.profiles.ranger import longest_route
@@ -128,7 +133,9 @@ def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
     params = NODE_PARAMS / "ranger_nodes.yaml"
     with ReplaySession(stream, context=context, params_file=str(params), rate=rate,
                        predictor_overrides={"runtime_period_s": 600.0}) as session:
-        session.play_until(stream.ros_time_ns(at_min * 60.0))
+        end_ns = stream.ros_time_ns(at_min * 60.0)
+        with bag_progress(stream, end_ns, "   replay", enabled=progress_wanted()) as update:
+            session.play_until(end_ns, on_step=bag_step(update, stream))
         state = session.predictor.route_core.latest_state()
         print(f"2) luggage robot (Ranger Mini): {bag.name} replayed to {at_min:g} min "
               f"({params.relative_to(REPO)})")

@@ -108,8 +108,10 @@ def run(args) -> int:
         out["params_written"] = str(extended.to_yaml(args.write_params))
     if args.report:
         from battery_predictor.diagnosis.report import write_report
+        from battery_predictor.io.paths import portable_path
 
-        command = "battery-predictor " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv else ""
+        command = ("battery-predictor " + " ".join(shlex.quote(portable_path(a)) for a in sys.argv[1:])
+                   if sys.argv else "")
         out["report"] = str(write_report(diag, args.report, command=command))
     if args.json:
         print_json(out)

@@ -59,6 +59,7 @@ def run(args) -> int:
     )
     from battery_predictor.fitting.problem import trim_to_discharge
     from battery_predictor.io.loader import load_recording
+    from battery_predictor.io.paths import portable_paths
     from battery_predictor.params import load_params
     from battery_predictor.prediction.core import PredictorConfig
 
@@ -145,7 +146,7 @@ def run(args) -> int:
         log(f"  MAE {r['mae_v']:.3f} V, MAPE {r['mape_pct']:.2f} % (paper {PAPER['route_mae_v']} V, "
             f"{PAPER['route_mape_pct']} %); decisions {r['decisions_correct']}/{r['decisions']} correct, "
             f"{r['unsafe_accepts']} unsafe")
-    md = report.write_markdown(out, summary, figures)
+    md = report.write_markdown(out, portable_paths(summary), figures)
     summary["seconds"] = time.perf_counter() - tic
     summary["report"] = str(md)
     if args.json:

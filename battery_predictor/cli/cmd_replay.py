@@ -49,8 +49,9 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     import rclpy
 
     from battery_predictor.cli._ros_params import check_node_params_file
-    from battery_predictor.cli.common import check_output_dir
+    from battery_predictor.cli.common import bag_progress, bag_step, check_output_dir, progress_wanted
     from battery_predictor.errors import InputDataError
+    from battery_predictor.io.paths import portable_paths
     from battery_predictor.nodes.replay_session import ReplaySession, default_output_dir
     from battery_predictor.replay import (
         OutputBag,
@@ -83,7 +84,7 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     own_context = context is None
     if own_context:
         rclpy.init(args=["battery-predictor"])
-    output = OutputBag(bag_out, metadata={"replay_of": str(bag), "params": str(params), "rate": rate})
+    output = OutputBag(bag_out, metadata=portable_paths({"replay_of": str(bag), "params": str(params), "rate": rate}))
     try:
         if not quiet:
             print(f"replay: {stream.source}: {stream.style} topics {', '.join(stream.topics)}, "
@@ -91,7 +92,8 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
                   + (f", at most {rate:g}x" if rate > 0 else ", as fast as possible"), flush=True)
         with ReplaySession(stream, context=context, params_file=params, predictor_overrides=overrides, rate=rate,
                            out_bag=output) as session:
-            stats = session.play_until()
+            with bag_progress(stream, None, "replay", enabled=not quiet and progress_wanted()) as update:
+                stats = session.play_until(on_step=bag_step(update, stream))
             session.flush()
             points = session.runtime_points()
             n_states = len(session.pack_states())

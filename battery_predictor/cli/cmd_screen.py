@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import itertools
 import sys
 
-from battery_predictor.cli.common import print_json
+from battery_predictor.cli.common import print_json, progress_bar, progress_wanted
+
+#: What the table's columns mean (printed under it).
+COLUMNS_NOTE = ("runtime %: change of the time to the cut-off when the parameter is raised by 10 %; "
+                "R2: R2_mod of the voltage curve against the unchanged model's")
 
 
 def register(sub) -> None:
@@ -18,12 +23,16 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from battery_predictor.fitting.screening import screen
+    from battery_predictor.fitting.screening import screen, screenable_parameters
     from battery_predictor.params import load_params
     from battery_predictor.simulation import get_simulator
 
     params = load_params(args.params)
-    rows = screen(params, get_simulator(args.simulator), c_rate=args.c_rate)
+    total = len(screenable_parameters(params))
+    with progress_bar(total, "screen", "parameter", enabled=progress_wanted(args)) as update:
+        finished = itertools.count(1)
+        rows = screen(params, get_simulator(args.simulator), c_rate=args.c_rate,
+                      progress=lambda _row: update(next(finished)))
     relevant = [r for r in rows if r.relevant]
     if args.json:
         print_json({
@@ -40,5 +49,6 @@ def run(args) -> int:
     for k, r in enumerate(shown, 1):
         note = f"  ({r.error})" if r.error else ""
         print(f"{k:>4}  {r.name:<62} {r.runtime_change_pct:>+10.2f} {r.r2:>8.4f}  {'yes' if r.relevant else 'no'}{note}")
+    print(COLUMNS_NOTE)
     sys.stdout.flush()
     return 0

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from battery_predictor.errors import InputDataError
 from battery_predictor.params import PackParams
@@ -130,3 +131,54 @@ def check_output_dir(path: str | os.PathLike[str], option: str) -> Path:
         return p
     _writable_parent(p, option)
     return p
+
+
+def bag_progress(stream, end_ns: int | None, desc: str, *, enabled: bool):
+    """:func:`progress_bar` over a replay in bag minutes, with the ``on_step(t_ns)`` callback it needs."""
+    last_ns = stream.end_ns if end_ns is None else min(end_ns, stream.end_ns)
+    total_min = max(last_ns - stream.start_ns, 0) / 60e9
+    return progress_bar(round(total_min, 1), desc, "bag min", enabled=enabled)
+
+
+def bag_step(update: Callable[[float], None], stream) -> Callable[[int], None]:
+    """The ``on_step(t_ns)`` of :meth:`ReplaySession.play_until` that moves a :func:`bag_progress` bar."""
+    return lambda t_ns: update(round((t_ns - stream.start_ns) / 60e9, 1))
+
+
+#: A progress bar appears only once its wait has lasted this long, s.
+PROGRESS_DELAY_S = 2.0
+
+
+def progress_wanted(args=None, stream: TextIO | None = None) -> bool:
+    """Progress bars go to an interactive stderr only, and never with ``--json`` or ``--no-progress``."""
+    stream = sys.stderr if stream is None else stream
+    if args is not None and (getattr(args, "json", False) or getattr(args, "no_progress", False)):
+        return False
+    isatty = getattr(stream, "isatty", None)
+    return bool(isatty and isatty())
+
+
+@contextlib.contextmanager
+def progress_bar(total: float, desc: str, unit: str, *, enabled: bool, stream: TextIO | None = None,
+                 delay_s: float = PROGRESS_DELAY_S) -> Iterator[Callable[[float], None]]:
+    """A tqdm bar on ``stream`` (default stderr) shown only after ``delay_s``; yields ``update(done)``.
+
+    ``update`` takes the absolute amount done (same unit as ``total``). When not ``enabled`` it does
+    nothing, so callers need no branch.
+    """
+    if not enabled:
+        yield lambda _done: None
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr if stream is None else stream, delay=delay_s,
+               dynamic_ncols=True, leave=False)
+
+    def update(done: float) -> None:
+        bar.n = min(done, total)
+        bar.update(0)  # draws only after the delay, at most every mininterval
+
+    try:
+        yield update
+    finally:
+        bar.close()

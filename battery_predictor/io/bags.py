@@ -117,6 +117,7 @@ from battery_predictor.conventions import (
 )
 from battery_predictor.errors import BagError, BatteryPredictorError, InputDataError, option_hint
 from battery_predictor.io.csv_io import check_current_sign, check_temperature_k, check_units
+from battery_predictor.io.paths import portable_path, portable_paths
 from battery_predictor.jsonutil import json_default as _json_default
 from battery_predictor.recording import Recording
 
@@ -249,7 +250,7 @@ def write_recording_bag(
     if stamps[0] < 0:
         raise BagError(f"{p}: recording {recording.source}: time_s starts at {t[0]!r} s, too far before 2024-01-01")
 
-    meta = {**recording.metadata, **(metadata or {})}
+    meta = portable_paths({**recording.metadata, **(metadata or {})})
     custom: dict[str, str] = {}
     for key, value in meta.items():
         if not isinstance(key, str) or not key:
@@ -261,7 +262,7 @@ def write_recording_bag(
         except (TypeError, ValueError) as exc:
             raise BagError(f"{p}: metadata key {key!r}: value is not JSON-serialisable ({exc})") from None
     custom[_KEY_STYLE] = style
-    custom[_KEY_SOURCE] = str(recording.source)
+    custom[_KEY_SOURCE] = portable_path(str(recording.source))
     custom[_KEY_ORIGIN_NS] = str(origin_ns)
     custom[_KEY_BASE_S] = repr(t_base)
 

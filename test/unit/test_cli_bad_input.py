@@ -6,16 +6,22 @@ Every error here is one line on stderr, exit code 2, no traceback, and names the
 from __future__ import annotations
 
 import argparse
+import io
+import json
+import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 import yaml
 
+from battery_predictor.cli.cmd_demo import output_dir
+from battery_predictor.cli.common import progress_bar, progress_wanted
 from battery_predictor.cli.main import build_parser, flag_map
-from battery_predictor.errors import cli_flags, option_hint
-from battery_predictor.io.bags import read_recording_bag
+from battery_predictor.errors import InputDataError, cli_flags, option_hint
+from battery_predictor.io.bags import read_recording_bag, write_recording_bag
 from battery_predictor.io.csv_io import save_csv
 
 REPO = Path(__file__).resolve().parents[2]
@@ -181,3 +187,88 @@ def test_repeated_timestamp_says_so_and_names_duplicate_times(tmp_path):
     message = _one_line_error(_run("diagnose", "--params", TEMI, "--data", _csv(tmp_path, body)),
                               "repeats the time of line 3", "use --duplicate-times keep_last")
     assert "not greater than" not in message
+
+
+# --------------------------------------------------------------------------- 5. progress on waits
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_only_on_an_interactive_stderr_and_never_with_json():
+    assert progress_wanted(argparse.Namespace(json=False), _Terminal())
+    assert not progress_wanted(argparse.Namespace(json=True), _Terminal())
+    assert not progress_wanted(argparse.Namespace(json=False, no_progress=True), _Terminal())
+    assert not progress_wanted(argparse.Namespace(json=False), io.StringIO())
+
+
+def test_progress_bar_appears_after_its_delay_and_stays_quiet_on_short_waits():
+    short, long = _Terminal(), _Terminal()
+    with progress_bar(5, "quick", "step", enabled=True, stream=short, delay_s=0.5) as update:
+        for k in range(5):
+            update(k + 1)
+    with progress_bar(5, "slow", "step", enabled=True, stream=long, delay_s=0.2) as update:
+        for k in range(5):
+            time.sleep(0.1)
+            update(k + 1)
+    assert short.getvalue() == ""
+    assert "slow" in long.getvalue() and "5/5" in long.getvalue()
+
+
+# ------------------------------------------------------------------- 6. readable, portable artefacts
+MACHINE_PATH = re.compile(r"[\"'` ]/(?:home|root|tmp|work|Users|var)/|sqlite:////")
+
+
+def test_bag_info_is_a_short_readable_summary_and_json_keeps_everything():
+    proc = _run("bag", "info", "bags/ranger_route_20kg_pack1")
+    assert proc.returncode == 0, proc.stderr
+    assert max(len(line) for line in proc.stdout.splitlines()) <= 100
+    assert "--json prints them in full" in proc.stdout
+    full = json.loads(_run("bag", "info", "bags/ranger_route_20kg_pack1", "--json").stdout)
+    assert len(full["metadata"]["profile"]["curve_points"]["current_a"]) > 10
+
+
+def test_shipped_bags_and_reports_hold_no_absolute_paths():
+    files = [*REPO.glob("bags/*/metadata.yaml"), *REPO.glob("docs/**/*.json"), *REPO.glob("docs/**/*.md"),
+             *REPO.glob("docs/**/*.yaml")]
+    assert len(files) > 20
+    offenders = [str(f.relative_to(REPO)) for f in files
+                 if str(REPO) + "/" in f.read_text(errors="replace") or MACHINE_PATH.search(f.read_text(errors="replace"))]
+    assert offenders == []
+
+
+def test_written_bag_metadata_keeps_paths_relative_and_topics_as_they_are(tmp_path):
+    rec = read_recording_bag(TEMI_BAG)
+    meta = {"params": str(REPO / "params" / "temi.yaml"), "topic": "/battery_state",
+            "files": {str(REPO / "bags" / "temi_dynamic_pack1"): 1}}
+    write_recording_bag(rec, tmp_path / "bag", metadata=meta)
+    stored = read_recording_bag(tmp_path / "bag").metadata
+    assert stored["params"] == "params/temi.yaml"
+    assert stored["topic"] == "/battery_state"
+    assert stored["files"] == {"bags/temi_dynamic_pack1": 1}
+
+
+# ----------------------------------------------------------------------------------- 7. small ones
+def test_demo_without_out_removes_its_temporary_directory():
+    with output_dir(None) as out:
+        (out / "temi_outputs").mkdir()
+        assert out.is_dir()
+    assert not out.exists()
+
+
+def test_demo_out_with_earlier_outputs_is_refused(tmp_path):
+    (tmp_path / "temi_outputs").mkdir()
+    with pytest.raises(InputDataError, match="temi_outputs exists"), output_dir(str(tmp_path)):
+        pass
+
+
+def test_screen_table_explains_its_runtime_column(monkeypatch, capsys):
+    from battery_predictor.cli import cmd_screen
+    from battery_predictor.fitting import screening
+
+    row = screening.ScreeningRow("Electrode height [m]", 0.9, 12.0, 0.95, True)
+    monkeypatch.setattr(screening, "screen", lambda *a, **k: [row])
+    cmd_screen.run(argparse.Namespace(params=TEMI, simulator="fast", c_rate=None, all=False, json=False))
+    out = capsys.readouterr().out
+    assert "runtime %" in out.splitlines()[1]
+    assert "runtime %: change of the time to the cut-off when the parameter is raised by 10 %" in out
