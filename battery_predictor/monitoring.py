@@ -443,3 +443,29 @@ class BatteryMonitor:
 
 def _finite(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def monitor_windows(time_s, voltage_v, current_a, temperature_k=None,
+                    config: MonitorConfig | None = None) -> list[PackSnapshot]:
+    """The clean pack states a monitor publishes for a recorded series (offline, in time order).
+
+    Each sample is handed to :meth:`BatteryMonitor.add_sample` at its own time, so the windows,
+    rejections and stamps are those the ``battery_monitor`` node would publish in a replay.
+
+    Parameters
+    ----------
+    time_s, voltage_v, current_a : array_like
+        Samples in s, V and A (positive = discharge).
+    temperature_k : array_like, optional
+        Temperature in K per sample (None = not measured).
+    config : MonitorConfig, optional
+        Monitor settings (default: wide physical ranges, 5 s windows).
+    """
+    monitor = BatteryMonitor(config or MonitorConfig())
+    temps = [math.nan] * len(time_s) if temperature_k is None else temperature_k
+    out: list[PackSnapshot] = []
+    for t, v, i, t_k in zip(time_s, voltage_v, current_a, temps):
+        out += monitor.add_sample(float(t), float(v), float(i), float(t_k), float(t)).snapshots
+    if len(time_s):
+        out += monitor.tick(float(time_s[-1]) + monitor.config.window_s + monitor.config.late_allowance_s + 1e-6)
+    return [s for s in out if not s.stale]

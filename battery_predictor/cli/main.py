@@ -22,6 +22,7 @@ COMMAND_MODULES = (
     "battery_predictor.cli.cmd_replay",
     "battery_predictor.cli.cmd_evaluate",
     "battery_predictor.cli.cmd_evaluate_runtime",
+    "battery_predictor.cli.cmd_evaluate_runtime",
     "battery_predictor.cli.cmd_diagnose",
     "battery_predictor.cli.cmd_demo",
 )

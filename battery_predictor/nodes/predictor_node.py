@@ -57,6 +57,7 @@ from battery_predictor.prediction.core import (
     PredictorCore,
     RuntimeStatus,
 )
+from battery_predictor.prediction.load_estimate import ESTIMATORS
 from battery_predictor.prediction.route import RouteDecision, rejected
 
 #: A pack state this much older than the latest one restarts the predictor (time base restarted), s.
@@ -106,9 +107,11 @@ class PredictorNode(Node):
         if self.core.runner is None:
             self.get_logger().error(f"no usable pack model: {self.core.model_error}")
         else:
+            route = (f"route threshold {self.core.route_min_voltage_v:.2f} V at {self.core.standstill_current_a:.2f} A"
+                     if math.isfinite(self.core.route_min_voltage_v) else "no route threshold (routes are rejected)")
             self.get_logger().info(f"pack model {self.core.params.name} from {self.core.params.source} loaded in "
                                    f"{time.perf_counter() - t0:.1f} s; cut-off {self.core.cutoff_voltage_v:.2f} V, "
-                                   f"route threshold {self.core.route_min_voltage_v:.2f} V")
+                                   f"{route}")
         self._lock = threading.Lock()
         self._monitor_stale = False
         self._monitor_stale_since_s = math.nan
@@ -174,9 +177,28 @@ class PredictorNode(Node):
                 "(else 1.70 A).", 0.0, 1000.0)),
             stale_after_s=declare_float(self, "stale_after_s", 30.0,
                                         "A pack state older than this (node clock) is stale, s.", 0.01, 86400.0),
-            charge_current_a=declare_float(self, "charge_current_a", 0.2,
-                                           "A current below -charge_current_a (charging) ends the present discharge "
-                                           "cycle (its average current restarts), A.", 0.0, 1000.0),
+            charge_current_a=declare_float(self, "charge_current_a", _core_default("charge_current_a"),
+                                           "A current below -charge_current_a charges the pack, A.", 0.0, 1000.0),
+            charge_session_s=declare_float(
+                self, "charge_session_s", _core_default("charge_session_s"),
+                "Charging held this long is a charging session and ends the present discharge cycle (its load "
+                "statistics restart), s; shorter charging (regenerative braking, blips) stays in the cycle.",
+                0.0, 86400.0),
+            load_estimator=declare_str(self, "load_estimator", PredictorConfig.load_estimator,
+                                       "Average load of the present cycle: 'cycle' (mean since the cycle began, "
+                                       "the paper's) or 'ewma' (exponentially weighted, load_time_constant_s).",
+                                       ESTIMATORS),
+            load_time_constant_s=declare_float(self, "load_time_constant_s", _core_default("load_time_constant_s"),
+                                               "Time constant of the 'ewma' load estimator, s.", 1.0, 86400.0),
+            state_tolerance_v_per_cell=declare_float(
+                self, "state_tolerance_v_per_cell", _core_default("state_tolerance_v_per_cell"),
+                "Largest model-vs-measurement voltage disagreement per series cell before the state is "
+                "recalibrated; a fresh calibration still this far off rejects routes, V.", 0.001, 1.0),
+            jump_tolerance_v_per_cell=declare_float(
+                self, "jump_tolerance_v_per_cell", _core_default("jump_tolerance_v_per_cell"),
+                "A voltage step between two pack states beyond this per series cell (plus twice what the current "
+                "step explains) is a new pack state (battery swap): the history before it is dropped, V.",
+                0.001, 5.0),
             default_temperature_k=_unset(declare_float(
                 self, "default_temperature_k", 0.0,
                 "Temperature assumed when none is measured, K; 0 = the params file's operating.ambient_temperature_k.",

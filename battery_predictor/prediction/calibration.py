@@ -41,12 +41,16 @@ class Calibration:
         ``""``, or ``"below_empty"`` / ``"above_full"`` when the measurement lies outside the model's range.
     state : RunState or None
         The present model state (with gradients) when calibrated on history, else None.
+    latest_residual_v : float
+        Simulated minus measured pack voltage in V over the latest measurements (the last sample, or
+        the matched end of a history window); NaN when unknown.
     """
 
     soc: float
     residual_v: float
     clipped: str = ""
     state: RunState | None = None
+    latest_residual_v: float = math.nan
 
     @property
     def start(self) -> float | RunState:
@@ -116,7 +120,7 @@ def calibrate_soc(runner: PackRunner, voltage_v: float, current_a: float, temper
         return Calibration(soc, res, clipped)
     # the settle's end stands for "now": continue from its state (charge of the settle not counted)
     state = replace(run.final_state, soc_start=soc, charge_ah=0.0)  # keeps every group's solution
-    return Calibration(soc, res, clipped, state)
+    return Calibration(soc, res, clipped, state, res)
 
 
 def history_segments(time_s, current_a, max_segments: int = 24) -> list[tuple[float, float]]:
@@ -186,4 +190,4 @@ def calibrate_on_history(runner: PackRunner, time_s, voltage_v, current_a, tempe
     run = holder.get(soc0)
     if run is None or run.final_state is None:
         return Calibration(soc0, res, clipped)
-    return Calibration(runner.soc_of(run.final_state), res, clipped, run.final_state)
+    return Calibration(runner.soc_of(run.final_state), res, clipped, run.final_state, res)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +21,10 @@ from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.params import PackParams, load_params
 from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, history_segments
 from battery_predictor.prediction.cell_runner import PackRunner
+from battery_predictor.prediction.load_estimate import LoadEstimator
 from battery_predictor.prediction.route import RouteDecision, evaluate_route, rejected
 from battery_predictor.prediction.runtime import predict_remaining_runtime
+from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v, unexplained_jump_v
 
 # Status codes, identical to battery_predictor_msgs/RemainingRuntime constants.
 STATUS_OK = 0
@@ -31,6 +33,9 @@ STATUS_NO_INPUT = 2
 STATUS_MODEL_NOT_FITTED = 3
 STATUS_MODEL_FAILED = 4
 STATUS_BELOW_CUTOFF = 5
+STATUS_CHARGING = 6
+STATUS_NO_LOAD = 7
+STATUS_BEYOND_HORIZON = 8
 
 
 @dataclass(frozen=True)
@@ -50,7 +55,22 @@ class PredictorConfig:
     stale_after_s : float
         A pack state older than this is stale.
     charge_current_a : float
-        A current below ``-charge_current_a`` (charging) ends the present discharge cycle.
+        A current below ``-charge_current_a`` charges the pack.
+    charge_session_s : float
+        Charging held this long (s) is a charging session: it ends the present discharge cycle.
+        Shorter charging (regenerative braking, blips) stays part of the cycle.
+    load_estimator : str
+        ``"cycle"`` (mean net current of the present cycle, the paper's) or ``"ewma"``
+        (exponentially weighted, ``load_time_constant_s``); see :mod:`.load_estimate`.
+    load_time_constant_s : float
+        Time constant of the ``"ewma"`` load estimator, s.
+    state_tolerance_v_per_cell : float
+        Largest disagreement (V per series cell) between the propagated state's voltage and the
+        measurement before the state is recalibrated; a fresh calibration still this far off
+        rejects routes (the model cannot reproduce the pack).
+    jump_tolerance_v_per_cell : float
+        A voltage step between two windows beyond this (V per series cell, plus twice what the
+        current step explains) is a new pack state (battery swap): history before it is dropped.
     default_temperature_k : float
         Temperature used when none is measured; NaN = params ambient.
     route_currents_file : str
@@ -76,6 +96,11 @@ class PredictorConfig:
     standstill_current_a: float = math.nan
     stale_after_s: float = 30.0
     charge_current_a: float = 0.2
+    charge_session_s: float = 300.0
+    load_estimator: str = "cycle"
+    load_time_constant_s: float = 1800.0
+    state_tolerance_v_per_cell: float = 0.05
+    jump_tolerance_v_per_cell: float = 0.1
     default_temperature_k: float = math.nan
     route_currents_file: str = ""
     calibration_window_s: float = 600.0
@@ -98,43 +123,6 @@ class RuntimeStatus:
     reason: str
 
 
-class _CycleAverage:
-    """Time-weighted average current of the present discharge cycle (reset by charging)."""
-
-    def __init__(self, charge_current_a: float) -> None:
-        self.charge_current_a = charge_current_a
-        self.reset()
-
-    def reset(self) -> None:
-        self.charge_as = 0.0
-        self.duration_s = 0.0
-        self.last_stamp_s: float | None = None
-        self.last_current_a = 0.0
-        self.currents: deque[float] = deque(maxlen=20000)
-
-    def add(self, stamp_s: float, current_a: float) -> None:
-        if current_a < -self.charge_current_a:
-            self.reset()
-            return
-        if self.last_stamp_s is not None and stamp_s > self.last_stamp_s:
-            dt = min(stamp_s - self.last_stamp_s, 300.0)  # a gap counts at most 5 min
-            self.charge_as += dt * self.last_current_a
-            self.duration_s += dt
-        self.last_stamp_s = stamp_s
-        self.last_current_a = current_a
-        self.currents.append(current_a)
-
-    def quantile_a(self, q: float) -> float:
-        if not self.currents or q <= 0:
-            return math.nan
-        return float(np.quantile(np.fromiter(self.currents, float), min(q, 1.0)))
-
-    def mean_a(self) -> float:
-        if self.duration_s <= 0:
-            return self.last_current_a
-        return self.charge_as / self.duration_s
-
-
 class PredictorCore:
     """State and answers of the predictor (thread-safe).
 
@@ -153,7 +141,11 @@ class PredictorCore:
         self._history: deque[tuple[float, float, float, float]] = deque()
         self._cal_lock = threading.Lock()
         self._cal: tuple[float, float, Calibration] | None = None  # (stamp, full-calibration stamp, cal)
-        self._cycle = _CycleAverage(config.charge_current_a)
+        self._load = LoadEstimator(config.charge_current_a, config.charge_session_s, config.load_estimator,
+                                   config.load_time_constant_s)
+        #: Why the next calibration must start afresh ("" = it may continue the last one).
+        self._recalibrate_reason = ""
+        self.events: deque[tuple[float, str]] = deque(maxlen=100)
         self.model_error = ""
         self.params: PackParams | None = None
         self.runner: PackRunner | None = None
@@ -169,6 +161,11 @@ class PredictorCore:
         self.standstill_current_a = _pick(config.standstill_current_a, th.get("standstill_current_a"), 1.70)
         self.default_temperature_k = _pick(config.default_temperature_k,
                                            self.params.ambient_temperature_k if self.params else None, 298.15)
+        series = self.params.series if self.params else 1
+        self.state_tolerance_v = config.state_tolerance_v_per_cell * series
+        self.jump_tolerance_v = config.jump_tolerance_v_per_cell * series
+        self._resistance_cache: dict[int, float] = {}
+        self.resistance_ohm = self._resistance(self.default_temperature_k) if self.runner is not None else math.nan
         self._currents = None
         if config.route_currents_file:
             from battery_predictor.profiles.ranger import load_ranger_currents
@@ -178,20 +175,49 @@ class PredictorCore:
             except BatteryPredictorError as exc:
                 self.model_error = self.model_error or str(exc)
 
+    def _resistance(self, temperature_k: float) -> float:
+        """The pack's 5 s pulse resistance at ``temperature_k`` (cached per kelvin; NaN when the model fails)."""
+        key = round(temperature_k)
+        if key not in self._resistance_cache:
+            try:
+                self._resistance_cache[key] = pulse_resistance_ohm(self.runner, float(key))
+            except BatteryPredictorError:
+                self._resistance_cache[key] = math.nan
+        return self._resistance_cache[key]
+
     # ----------------------------------------------------------------- input
     def update_state(self, stamp_s: float, voltage_v: float, current_a: float, temperature_k: float) -> None:
         """Take a clean pack state (V, A positive = discharge, K or NaN) stamped ``stamp_s``."""
         if not (math.isfinite(stamp_s) and math.isfinite(voltage_v) and math.isfinite(current_a)):
             return
         with self._lock:
-            if self._state is not None and stamp_s <= self._state[0]:
+            previous = self._state
+            if previous is not None and stamp_s <= previous[0]:
                 return
             self._state = (stamp_s, voltage_v, current_a, temperature_k)
-            self._cycle.add(stamp_s, current_a)
+            was_charging = self._load.in_session
+            if self._load.add(stamp_s, current_a):
+                self._new_state(stamp_s, "a charging session began")
+            elif was_charging and not self._load.in_session:
+                self._new_state(stamp_s, "the charging session ended")
+            if previous is not None and self._is_jump(previous, self._state):
+                self._history.clear()
+                self._new_state(stamp_s, f"voltage jumped {previous[1]:.2f} -> {voltage_v:.2f} V at "
+                                         f"{previous[2]:.2f} -> {current_a:.2f} A (battery swap?)")
             self._history.append(self._state)
             horizon = max(self.config.calibration_window_s, self.config.recalibrate_after_s, 60.0) + 300.0
             while self._history and self._history[0][0] < stamp_s - horizon:
                 self._history.popleft()
+
+    def _is_jump(self, previous: tuple, latest: tuple) -> bool:
+        r_ohm = self.resistance_ohm if math.isfinite(self.resistance_ohm) else 0.0
+        allowed = self.jump_tolerance_v + 2.0 * abs(latest[2] - previous[2]) * r_ohm
+        return unexplained_jump_v(previous[1:3], latest[1:3], r_ohm) > allowed
+
+    def _new_state(self, stamp_s: float, why: str) -> None:
+        """Forget the calibrated state: the next answer calibrates afresh (caller holds ``_lock``)."""
+        self._recalibrate_reason = why
+        self.events.append((stamp_s, why))
 
     def latest_state(self) -> tuple[float, float, float, float] | None:
         """(stamp_s, voltage_v, current_a, temperature_k) of the latest state, or None."""
@@ -212,6 +238,10 @@ class PredictorCore:
     def calibration(self, temperature_k: float) -> Calibration:
         """Calibrated present state (cached; propagated between full calibrations).
 
+        The state is carried forward with the measured current between full calibrations while
+        its voltage stays within ``state_tolerance_v`` of the measurement; otherwise, after a
+        jump or a charging session, or after ``recalibrate_after_s``, it is calibrated afresh.
+
         Raises
         ------
         BatteryPredictorError
@@ -220,34 +250,50 @@ class PredictorCore:
         with self._cal_lock:
             with self._lock:
                 hist = list(self._history)
+                fresh_reason, self._recalibrate_reason = self._recalibrate_reason, ""
             if not hist:
                 raise BatteryPredictorError("no pack state to calibrate on")
             stamp = hist[-1][0]
-            cached = self._cal
+            cached = None if fresh_reason else self._cal
             if cached is not None and cached[0] == stamp:
                 return cached[2]
-            if (cached is not None and cached[2].state is not None
+            if (cached is not None and cached[2].state is not None and not cached[2].clipped
                     and stamp - cached[1] < self.config.recalibrate_after_s and stamp > cached[0]):
-                newer = [h for h in hist if h[0] >= cached[0]]
-                if len(newer) >= 2:
-                    t = np.array([h[0] for h in newer])
-                    i = np.array([h[2] for h in newer])
-                    segs = history_segments(t, i, max_segments=min(120, len(newer) - 1))
-                    run = self.runner.run(cached[2].state, segs, temperature_k)
-                    if run.final_state is not None and not run.reached_cutoff:
-                        v_sim = float(run.pack_voltage_v[-1])
-                        cal = Calibration(self.runner.soc_of(run.final_state), v_sim - hist[-1][1], "",
-                                          run.final_state)
-                        self._cal = (stamp, cached[1], cal)
-                        return cal
-            t = np.array([h[0] for h in hist])
-            v = np.array([h[1] for h in hist])
-            i = np.array([h[2] for h in hist])
-            window = self.config.calibration_window_s
-            cal = calibrate_on_history(self.runner, t, v, i, temperature_k, window_s=max(window, 1.0)) if window > 0 \
-                else calibrate_on_history(self.runner, t[-1:], v[-1:], i[-1:], temperature_k)
-            self._cal = (stamp, stamp, cal)
-            return cal
+                propagated = self._propagate(cached, hist, temperature_k)
+                if propagated is not None:
+                    return propagated
+            return self._calibrate_fresh(hist, temperature_k)
+
+    def _propagate(self, cached: tuple[float, float, Calibration], hist: list, temperature_k: float):
+        """The cached state carried to now by the measured current, or None when it left the measurement."""
+        newer = [h for h in hist if h[0] >= cached[0]]
+        if len(newer) < 2:
+            return None
+        t = np.array([h[0] for h in newer])
+        i = np.array([h[2] for h in newer])
+        segs = history_segments(t, i, max_segments=min(120, len(newer) - 1))
+        run = self.runner.run(cached[2].state, segs, temperature_k)
+        if run.final_state is None or run.reached_cutoff:
+            return None
+        residual = float(run.pack_voltage_v[-1]) - hist[-1][1]
+        if abs(residual) > self.state_tolerance_v:
+            with self._lock:
+                self.events.append((hist[-1][0], f"propagated state {residual:+.2f} V off the measurement: "
+                                                  "recalibrated"))
+            return None
+        cal = Calibration(self.runner.soc_of(run.final_state), residual, "", run.final_state, residual)
+        self._cal = (hist[-1][0], cached[1], cal)
+        return cal
+
+    def _calibrate_fresh(self, hist: list, temperature_k: float) -> Calibration:
+        t = np.array([h[0] for h in hist])
+        v = np.array([h[1] for h in hist])
+        i = np.array([h[2] for h in hist])
+        window = self.config.calibration_window_s
+        cal = calibrate_on_history(self.runner, t, v, i, temperature_k, window_s=max(window, 1.0)) if window > 0 \
+            else calibrate_on_history(self.runner, t[-1:], v[-1:], i[-1:], temperature_k)
+        self._cal = (t[-1], t[-1], cal)
+        return cal
 
     def _temperature(self, temperature_k: float) -> float:
         return temperature_k if math.isfinite(temperature_k) and 200 < temperature_k < 400 else \
@@ -255,37 +301,58 @@ class PredictorCore:
 
     # --------------------------------------------------------------- answers
     def remaining_runtime(self, now_s: float) -> RuntimeStatus:
-        """Remaining runtime until the cut-off under the present cycle's average load."""
+        """Remaining runtime until the cut-off under the present cycle's load (never raises for bad input)."""
         status, reason, state = self._usable_state(now_s)
         cutoff = self.cutoff_voltage_v
         if status != STATUS_OK:
-            return RuntimeStatus(now_s, math.nan, math.nan, math.nan, math.nan, cutoff, False, status, reason)
+            return _invalid_runtime(now_s, cutoff, status, reason)
         stamp, v, i, t_k = state
         temp = self._temperature(t_k)
         with self._lock:
-            avg = self._cycle.mean_a()
-            peak = self._cycle.quantile_a(self.config.peak_current_quantile)
-        avg = avg if avg > 0.05 else max(i, 0.05)
+            load = self._load.estimate()
+            peak = self._load.quantile_a(self.config.peak_current_quantile)
         if v <= cutoff:
-            return RuntimeStatus(stamp, 0.0, avg, temp, math.nan, cutoff, True, STATUS_BELOW_CUTOFF,
-                                 f"pack voltage {v:.2f} V is at or below the cut-off {cutoff:.2f} V")
+            return _invalid_runtime(stamp, cutoff, STATUS_BELOW_CUTOFF,
+                                    f"pack voltage {v:.2f} V is at or below the cut-off {cutoff:.2f} V",
+                                    remaining_s=0.0, temperature_k=temp)
+        if load.charging:
+            return _invalid_runtime(stamp, cutoff, STATUS_CHARGING, f"charging at {-load.charging_current_a:.2f} A",
+                                    temperature_k=temp)
+        avg = load.mean_current_a
+        if not (math.isfinite(avg) and avg > 0):
+            what = "no discharge measured yet" if not math.isfinite(avg) else f"net load {avg:.3f} A"
+            return _invalid_runtime(stamp, cutoff, STATUS_NO_LOAD,
+                                    f"no discharge load in the present cycle to predict from ({what})",
+                                    temperature_k=temp)
         try:
             pred = predict_remaining_runtime(self.runner, v, i, temp, avg, cutoff,
                                              calibration=self.calibration(temp),
                                              peak_current_a=peak if math.isfinite(peak) else None)
         except BatteryPredictorError as exc:
-            return RuntimeStatus(stamp, math.nan, avg, temp, math.nan, cutoff, False, STATUS_MODEL_FAILED,
-                                 f"model failed: {exc}")
-        note = f"; calibration {pred.calibration.clipped}" if pred.calibration.clipped else ""
+            return _invalid_runtime(stamp, cutoff, STATUS_MODEL_FAILED, f"model failed: {exc}", temperature_k=temp)
+        soc, soc_note = published_soc(pred.calibration.soc)
+        notes = [n for n in (soc_note, f"calibration {pred.calibration.clipped}" if pred.calibration.clipped else "")
+                 if n]
+        note = "; " + "; ".join(notes) if notes else ""
         peaks = f" with {peak:.2f} A peaks" if pred.limited_by == "peak_cutoff" else ""
+        if pred.limited_by == "horizon":
+            return RuntimeStatus(stamp, pred.remaining_s, avg, temp, soc, cutoff, False, STATUS_BEYOND_HORIZON,
+                                 f"more than {pred.remaining_s / 60:.0f} min at {avg:.2f} A (the longest horizon "
+                                 f"simulated){note}")
+        if pred.limited_by == "peak_cutoff" and pred.remaining_s == 0.0:
+            note = f"; a {peak:.2f} A load peak now would reach the cut-off{note}"
         reason = (f"{pred.remaining_s / 60:.1f} min at {avg:.2f} A{peaks}, {temp - 273.15:.1f} degC until "
                   f"{cutoff:.2f} V ({pred.limited_by}){note}")
-        return RuntimeStatus(stamp, pred.remaining_s, avg, temp, pred.calibration.soc, cutoff, True, STATUS_OK,
-                             reason)
+        return RuntimeStatus(stamp, pred.remaining_s, avg, temp, soc, cutoff, True, STATUS_OK, reason)
 
     def can_accept_route(self, sections, now_s: float, *, starts_away_from_charger: bool = False,
                          ends_away_from_charger: bool = False) -> RouteDecision:
-        """Decide a route (sections: :class:`~battery_predictor.profiles.ranger.RouteSection`)."""
+        """Decide a route (sections: :class:`~battery_predictor.profiles.ranger.RouteSection`).
+
+        Accepted only when the latest measurement, moved to the standstill current, is above the
+        threshold, the freshly calibrated state reproduces the measurement within
+        ``state_tolerance_v`` and the simulated route ends above the threshold.
+        """
         threshold = self.route_min_voltage_v
         if not math.isfinite(threshold):
             return rejected("params define no route threshold (thresholds.route_min_voltage_v)", threshold)
@@ -294,23 +361,56 @@ class PredictorCore:
             return rejected(f"state unknown: {reason}", threshold)
         _, v, i, t_k = state
         temp = self._temperature(t_k)
+        r_ohm = self._resistance(temp)
+        if not math.isfinite(r_ohm):
+            return rejected("model failed: no pack resistance at this temperature", threshold)
+        v_standstill = standstill_voltage_v(v, i, self.standstill_current_a, r_ohm)
+        if v_standstill < threshold:
+            return rejected(f"measured {v:.2f} V at {i:.2f} A ({v_standstill:.2f} V at the standstill current "
+                            f"{self.standstill_current_a:.2f} A) is already below the route threshold "
+                            f"{threshold:.2f} V", threshold)
         try:
             cal = self.calibration(temp)
         except BatteryPredictorError as exc:
             return rejected(f"model failed while calibrating: {exc}", threshold)
+        soc, soc_note = published_soc(cal.soc)
         if cal.clipped == "below_empty":
             return rejected(f"pack voltage {v:.2f} V at {i:.2f} A is below the model's empty state", threshold,
-                            soc=cal.soc)
+                            soc=soc)
+        if cal.clipped != "above_full" and not abs(cal.latest_residual_v) <= self.state_tolerance_v:
+            return rejected(f"the model cannot reproduce the measured {v:.2f} V (off by {cal.latest_residual_v:+.2f} V "
+                            f"after calibration, tolerance {self.state_tolerance_v:.2f} V): state uncertain",
+                            threshold, soc=soc)
         decision = evaluate_route(self.runner, cal.start, sections, temp, threshold_v=threshold,
                                   standstill_current_a=self.standstill_current_a, currents=self._currents)
-        notes = []
+        notes = [soc_note] if soc_note else []
         if starts_away_from_charger:
             notes.append("starts away from the charger (state as measured now)")
         if ends_away_from_charger:
             notes.append("ends away from the charger: no return leg included")
-        if notes:
-            decision = RouteDecision(**{**decision.__dict__, "reason": decision.reason + "; " + "; ".join(notes)})
-        return decision
+        reason = decision.reason + ("; " + "; ".join(notes) if notes else "")
+        return replace(decision, state_of_charge=soc, reason=reason)
+
+
+def published_soc(soc: float) -> tuple[float, str]:
+    """The SOC as published (clamped to 0..1) and a note when the model's value lies outside.
+
+    The model's SOC is PyBaMM's linear scale between the OCV at the cell's lower (0) and upper
+    (1) voltage cut-off; a pack may be used beyond them (e.g. a route threshold below the 0 %
+    OCV point), so the model's value is given in the note when it is clamped.
+    """
+    if not math.isfinite(soc):
+        return math.nan, ""
+    if soc < 0.0:
+        return 0.0, f"model SOC {soc:.3f} (below the 0 % OCV point)"
+    if soc > 1.0:
+        return 1.0, f"model SOC {soc:.3f} (above the 100 % OCV point)"
+    return soc, ""
+
+
+def _invalid_runtime(stamp_s: float, cutoff_v: float, status: int, reason: str, *, remaining_s: float = math.nan,
+                     temperature_k: float = math.nan) -> RuntimeStatus:
+    return RuntimeStatus(stamp_s, remaining_s, math.nan, temperature_k, math.nan, cutoff_v, False, status, reason)
 
 
 def _pick(*values) -> float:

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.prediction.calibration import Calibration, calibrate_soc
@@ -76,7 +77,7 @@ def peak_voltage_drop_v(runner: PackRunner, start, average_current_a: float, pea
 
 def peak_crossing_s(runner: PackRunner, start, average_current_a: float, peak_current_a: float,
                     temperature_k: float, cutoff_voltage_v: float, average_run, *, settle_s: float = 5.0,
-                    tolerance_s: float = 30.0, max_runs: int = 8) -> float | None:
+                    tolerance_s: float = 30.0, max_runs: int = 16) -> float | None:
     """First time (s) at which a load peak, drawn from the average-load trajectory, pulls the pack to the cut-off.
 
     ``g(t)`` = mean pack voltage over ``settle_s`` at ``peak_current_a`` after ``t`` s at
@@ -86,9 +87,13 @@ def peak_crossing_s(runner: PackRunner, start, average_current_a: float, peak_cu
     average-load trajectory lowered by the peak's extra drop at the present state.
 
     Returns None when no crossing exists before the end of ``average_run``.
-    """
-    from scipy.optimize import brentq
 
+    Raises
+    ------
+    SimulationError
+        When the search finds no crossing in the bracket or does not converge in ``max_runs``
+        runs: never a made-up time.
+    """
     def g(t_s: float) -> float:
         run = runner.run(start, ([(t_s, average_current_a)] if t_s > 1.0 else []) + [(settle_s, peak_current_a)],
                          temperature_k)
@@ -115,9 +120,14 @@ def peak_crossing_s(runner: PackRunner, start, average_current_a: float, peak_cu
     if hi - lo <= tolerance_s:
         return 0.5 * (lo + hi)
     try:
-        return float(brentq(g, lo, hi, xtol=tolerance_s, maxiter=max_runs))
-    except (ValueError, RuntimeError):  # no sign change (model noise at the bracket) or not converged
-        return lo
+        root, result = brentq(g, lo, hi, xtol=tolerance_s, maxiter=max_runs, full_output=True, disp=False)
+    except ValueError as exc:  # no sign change over the bracket: the model is not monotone here
+        raise SimulationError(f"peak-load runtime search found no crossing between {lo / 60:.1f} and "
+                              f"{hi / 60:.1f} min ({exc})") from None
+    if not result.converged:
+        raise SimulationError(f"peak-load runtime search did not converge in {max_runs} model runs "
+                              f"(bracket {lo / 60:.1f}..{hi / 60:.1f} min)")
+    return float(root)
 
 
 def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: float, temperature_k: float,

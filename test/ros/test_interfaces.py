@@ -65,6 +65,9 @@ def test_remaining_runtime_fields_and_status_constants() -> None:
         "STATUS_MODEL_NOT_FITTED": 3,
         "STATUS_MODEL_FAILED": 4,
         "STATUS_BELOW_CUTOFF": 5,
+        "STATUS_CHARGING": 6,
+        "STATUS_NO_LOAD": 7,
+        "STATUS_BEYOND_HORIZON": 8,
     }
     for name, value in expected.items():
         assert getattr(RemainingRuntime, name) == value, name

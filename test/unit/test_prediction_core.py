@@ -12,6 +12,7 @@ from battery_predictor.params import load_params
 from battery_predictor.prediction.calibration import calibrate_on_history, calibrate_soc
 from battery_predictor.prediction.cell_runner import PackRunner
 from battery_predictor.prediction.core import (
+    STATUS_CHARGING,
     STATUS_MODEL_NOT_FITTED,
     STATUS_NO_INPUT,
     STATUS_OK,
@@ -122,18 +123,26 @@ def test_core_with_broken_params_reports_model_not_fitted(tmp_path):
     assert not core.can_accept_route(longest_route(20).sections, 1.0).accepted
 
 
-def test_core_runtime_uses_the_discharge_cycle_average_and_resets_on_charge():
+def test_core_runtime_uses_the_cycle_average_through_blips_and_restarts_after_a_charging_session():
     core = PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml")))
     for k in range(10):
         core.update_state(10.0 * k, 15.5, 2.0 if k % 2 else 4.0, 298.15)
     rt = core.remaining_runtime(95.0)
     assert rt.status == STATUS_OK and rt.valid
     assert rt.assumed_current_a == pytest.approx(3.0, abs=0.25)
-    core.update_state(100.0, 16.0, -5.0, 298.15)  # charging ends the cycle
-    core.update_state(110.0, 15.9, 1.0, 298.15)
-    core.update_state(120.0, 15.9, 1.0, 298.15)
-    assert core.remaining_runtime(121.0).assumed_current_a == pytest.approx(1.0)
-    assert math.isfinite(core.remaining_runtime(121.0).remaining_s)
+    core.update_state(100.0, 15.6, -2.0, 298.15)  # a 10 s charging blip stays in the cycle
+    core.update_state(110.0, 15.5, 3.0, 298.15)
+    blip = core.remaining_runtime(111.0)
+    assert blip.valid and blip.assumed_current_a == pytest.approx((9 * 10 * 3.0 + 10 * 3.0 - 10 * 2.0) / 110, rel=0.05)
+    for k in range(32):  # 320 s at -5 A: a charging session ends the cycle
+        core.update_state(120.0 + 10.0 * k, 16.0, -5.0, 298.15)
+    charging = core.remaining_runtime(441.0)
+    assert (charging.valid, charging.status) == (False, STATUS_CHARGING) and "charging at 5.00 A" in charging.reason
+    core.update_state(450.0, 15.9, 1.0, 298.15)
+    core.update_state(460.0, 15.9, 1.0, 298.15)
+    after = core.remaining_runtime(461.0)
+    assert after.valid and after.assumed_current_a == pytest.approx(1.0)
+    assert math.isfinite(after.remaining_s)
 
 
 def test_history_calibration_carries_polarisation_and_beats_single_sample(temi_runner):

@@ -1,0 +1,154 @@
+"""``battery-predictor evaluate-runtime``: the predictor's remaining runtime on measured recordings.
+
+Prints per recording and pooled MAE / MAPE / bias / worst error of the predictor's core (fed the
+monitor's 5 s windows, default settings) and, side by side, of naive Coulomb counters; writes a
+plot of predicted vs true remaining runtime per recording and the figures as JSON with ``--out``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+from battery_predictor.cli.common import add_input_check_arguments, check_output_dir, print_json
+from battery_predictor.errors import InputDataError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("evaluate-runtime",
+                       help="remaining runtime on measured recordings: predictor vs Coulomb counters")
+    p.add_argument("--params", required=True, help="fitted pack params YAML")
+    p.add_argument("--data", nargs="+", required=True, metavar="FILE",
+                   help="recordings (CSV or rosbag2), each one discharge to the cut-off")
+    p.add_argument("--cutoff-v", type=float, default=None, metavar="V",
+                   help="pack voltage at which the robot stops (default: the params file's)")
+    p.add_argument("--checkpoints", default="0.1:0.9:0.1", metavar="START:STOP:STEP",
+                   help="fractions of each discharge at which to predict (default 0.1:0.9:0.1)")
+    p.add_argument("--capacity-ah", type=float, default=None, metavar="AH",
+                   help="a capacity for the counter (in addition to the params' nominal one)")
+    p.add_argument("--capacity-from", nargs="+", default=(), metavar="FILE",
+                   help="recordings (e.g. the fit data) whose mean charge to the cut-off is a counter's capacity")
+    p.add_argument("--end-margin-v", type=float, default=None, metavar="V",
+                   help="a discharge that stops this close to the cut-off ended on it (default 0.5 V per cell)")
+    p.add_argument("--out", default=None, metavar="DIR", help="write summary.json, checkpoints.json and plots here")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_input_check_arguments(p)
+    p.set_defaults(func=run)
+
+
+def parse_checkpoints(text: str) -> tuple[float, ...]:
+    """``"0.1:0.9:0.1"`` -> (0.1, ..., 0.9); a comma list is taken as is."""
+    try:
+        if ":" in text:
+            start, stop, step = (float(x) for x in text.split(":"))
+            if step <= 0:
+                raise ValueError
+            values = []
+            k = 0
+            while start + k * step <= stop + 1e-9:
+                values.append(round(start + k * step, 6))
+                k += 1
+        else:
+            values = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise InputDataError(f"--checkpoints {text!r}: expected START:STOP:STEP or a comma list of fractions") from None
+    if not values or any(not 0.0 < v < 1.0 for v in values):
+        raise InputDataError(f"--checkpoints {text!r}: fractions must lie strictly between 0 and 1")
+    return tuple(values)
+
+
+def run(args) -> int:
+    from battery_predictor.evaluation import runtime_eval as ev
+    from battery_predictor.io.loader import load_recording
+    from battery_predictor.params import load_params
+    from battery_predictor.prediction.core import PredictorConfig, PredictorCore
+
+    checkpoints = parse_checkpoints(args.checkpoints)
+    out_dir = check_output_dir(args.out, "--out") if args.out else None
+    tic = time.perf_counter()
+    params = load_params(args.params)
+    cutoff_v = args.cutoff_v if args.cutoff_v is not None else \
+        PredictorCore(PredictorConfig(params_file=str(params.source)), params=params).cutoff_voltage_v
+    if not (math.isfinite(cutoff_v) and cutoff_v > 0):
+        raise InputDataError(f"{params.source}: no cut-off voltage in the params; pass --cutoff-v V")
+
+    def load(path: str):
+        return load_recording(path, duplicate_times=args.duplicate_times, drop_nan=args.drop_nan,
+                              expect_discharge=None if args.expect_discharge else False)
+
+    capacities = {}
+    if math.isfinite(ev.nominal_capacity_ah(params)):
+        capacities["nominal"] = ev.nominal_capacity_ah(params)
+    if args.capacity_ah is not None:
+        capacities["given"] = float(args.capacity_ah)
+    if args.capacity_from:
+        charges = [ev.charge_to_end_ah(params, load(p), cutoff_v, args.end_margin_v) for p in args.capacity_from]
+        known = [q for q in charges if math.isfinite(q)]
+        if not known:
+            raise InputDataError("--capacity-from: none of these recordings ends at the cut-off")
+        capacities["measured"] = sum(known) / len(known)
+    results = []
+    for path in args.data:
+        res = ev.evaluate_recording(params, load(path), cutoff_v=cutoff_v, capacities_ah=capacities,
+                                    checkpoints=checkpoints, end_margin_v=args.end_margin_v)
+        results.append(res)
+        if not args.json:
+            _print_recording(res, list(capacities))
+    summary = ev.summarise(results, list(capacities))
+    summary.update({"params": str(params.source), "cutoff_v": cutoff_v, "capacities_ah": capacities,
+                    "checkpoints": list(checkpoints), "seconds": time.perf_counter() - tic})
+    if out_dir is not None:
+        _write_outputs(out_dir, summary, results)
+        summary["out"] = str(out_dir)
+    if args.json:
+        print_json(summary)
+    else:
+        _print_pooled(summary)
+    return 0
+
+
+def _fmt(x: float, spec: str = ".1f") -> str:
+    return format(x, spec) if isinstance(x, (int, float)) and math.isfinite(x) else "-"
+
+
+def _line(name: str, f: dict) -> str:
+    return (f"  {name:<20} MAE {_fmt(f['mae_min']):>6} min  MAPE {_fmt(f['mape_pct']):>6} %  "
+            f"bias {_fmt(f['bias_min'], '+.1f'):>7} min  worst {_fmt(f['worst_min'], '+.1f'):>7} min  "
+            f"answered {f['answered']}/{f['checkpoints']}")
+
+
+def _print_recording(res, counters: list[str]) -> None:
+    from battery_predictor.evaluation.runtime_eval import summarise
+
+    block = summarise([res], counters)["per_recording"][0]
+    d = res.discharge
+    print(f"{Path(res.source).name}: {(d.end_s - d.start_s) / 60:.1f} min discharge (end: {d.ended_by}), "
+          f"{_fmt(res.mean_temperature_c)} degC")
+    for name in ["predictor", *(f"counter[{c}]" for c in counters)]:
+        print(_line(name, block[name]))
+    invalid = [c for c in res.checkpoints if not c.valid]
+    for c in invalid:
+        print(f"    invalid at {c.fraction:.0%}: {c.reason}")
+
+
+def _print_pooled(summary: dict) -> None:
+    print(f"pooled over {len(summary['per_recording'])} recordings (capacities: "
+          + ", ".join(f"{k} {v:.3f} Ah" for k, v in summary["capacities_ah"].items()) + "):")
+    for name, f in summary["pooled"].items():
+        print(_line(name, f))
+    if "out" in summary:
+        print(f"written: {summary['out']}/summary.json, checkpoints.json, runtime.png")
+
+
+def _write_outputs(out_dir: Path, summary: dict, results) -> None:
+    from battery_predictor.evaluation.runtime_eval import result_rows
+    from battery_predictor.evaluation.runtime_plot import plot_runtime
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    clean = json.loads(json.dumps(summary, default=str).replace("NaN", "null"))
+    (out_dir / "summary.json").write_text(json.dumps(clean, indent=1) + "\n")
+    rows = json.loads(json.dumps(result_rows(results), default=str).replace("NaN", "null"))
+    (out_dir / "checkpoints.json").write_text(json.dumps(rows, indent=1) + "\n")
+    plot_runtime(results, out_dir / "runtime.png")

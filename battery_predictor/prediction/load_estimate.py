@@ -1,0 +1,157 @@
+"""The load a remaining-runtime prediction assumes: the present discharge cycle's statistics.
+
+A discharge cycle runs from its first discharge after a charging session (or after start-up) to the
+start of the next charging session; rest before that first discharge (a soak, a robot parked on
+its charger) is not part of its load. Only a
+*charging session* ends it: a charging current (below ``-charge_current_a``) held for at least
+``charge_session_s`` of charging time, without a discharge in between. Regenerative braking,
+short charging blips and pauses belong to the cycle: they enter its average as what they are
+(negative or zero current), so a drive cycle with regen keeps its load estimate.
+
+Two estimators of the average load, both time-weighted over the 5 s window averages:
+
+- ``"cycle"`` (default, the paper's): the mean net current since the cycle began;
+- ``"ewma"``: an exponentially weighted mean with time constant ``time_constant_s``, normalised
+  by its weight so that it equals the cycle mean while the cycle is young; it follows a change of
+  usage within a cycle at the price of more noise.
+
+The recurring load peak is a quantile of the cycle's window currents (see ``PredictorConfig``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+#: A gap between two samples counts at most this long in the averages, s.
+MAX_GAP_S = 300.0
+#: Load estimators of :class:`LoadEstimator`.
+ESTIMATORS = ("cycle", "ewma")
+
+
+@dataclass(frozen=True)
+class LoadEstimate:
+    """The load statistics of the present discharge cycle.
+
+    Attributes
+    ----------
+    mean_current_a : float
+        Estimated average net pack current in A (positive = discharge); NaN before two samples.
+    duration_s : float
+        Length of the present cycle covered by samples, s.
+    charging : bool
+        True while a charging session is in progress (the pack charges and has charged for at
+        least ``charge_session_s``).
+    charging_current_a : float
+        Latest current while charging, A (negative); NaN otherwise.
+    """
+
+    mean_current_a: float
+    duration_s: float
+    charging: bool
+    charging_current_a: float
+
+
+class LoadEstimator:
+    """Discharge-cycle load statistics fed with window averages (not thread-safe; the core locks).
+
+    Parameters
+    ----------
+    charge_current_a : float
+        A current below ``-charge_current_a`` (A) charges the pack.
+    charge_session_s : float
+        Charging time (s) after which a charging session ends the discharge cycle.
+    estimator : {"cycle", "ewma"}
+        How the average load is estimated (module docstring).
+    time_constant_s : float
+        Time constant of ``"ewma"``, s.
+    """
+
+    def __init__(self, charge_current_a: float, charge_session_s: float = 300.0, estimator: str = "cycle",
+                 time_constant_s: float = 1800.0) -> None:
+        if estimator not in ESTIMATORS:
+            raise ValueError(f"load estimator {estimator!r} is not one of {', '.join(ESTIMATORS)}")
+        if not time_constant_s > 0:
+            raise ValueError(f"time_constant_s must be > 0, got {time_constant_s}")
+        self.charge_current_a = charge_current_a
+        self.charge_session_s = charge_session_s
+        self.estimator = estimator
+        self.time_constant_s = time_constant_s
+        self.sessions_ended = 0
+        self._charging_s = 0.0
+        self._in_session = False
+        self._last_stamp_s: float | None = None
+        self._last_current_a = 0.0
+        self._reset_cycle()
+
+    def _reset_cycle(self) -> None:
+        self._started = False
+        self._charge_as = 0.0
+        self._duration_s = 0.0
+        self._ewma_sum = 0.0
+        self._ewma_weight = 0.0
+        self.currents: deque[float] = deque(maxlen=20000)
+
+    def add(self, stamp_s: float, current_a: float) -> bool:
+        """Take a window average (s, A positive = discharge); True when a charging session just began."""
+        dt = 0.0
+        if self._last_stamp_s is not None and stamp_s > self._last_stamp_s:
+            dt = min(stamp_s - self._last_stamp_s, MAX_GAP_S)
+        previous = self._last_current_a
+        self._last_stamp_s = stamp_s
+        self._last_current_a = current_a
+        was_in_session = self._in_session
+        began = self._track_charging(dt, previous, current_a)
+        if self._in_session:
+            return began
+        if not self._started:
+            if current_a <= self.charge_current_a:
+                return began  # idle or charging before the cycle's first discharge: not its load
+            self._started = True
+            dt = 0.0
+        if dt > 0 and not was_in_session:  # the interval that ends a session belongs to the charger
+            self._charge_as += dt * previous
+            self._duration_s += dt
+            decay = math.exp(-dt / self.time_constant_s)
+            self._ewma_sum = self._ewma_sum * decay + previous * (1.0 - decay)
+            self._ewma_weight = self._ewma_weight * decay + (1.0 - decay)
+        self.currents.append(current_a)
+        return began
+
+    def _track_charging(self, dt: float, previous_a: float, current_a: float) -> bool:
+        """Count charging time; a session begins once it reaches ``charge_session_s``, ends at a discharge."""
+        if current_a > self.charge_current_a:
+            self._charging_s = 0.0
+            self._in_session = False
+            return False
+        if previous_a < -self.charge_current_a:
+            self._charging_s += dt
+        if not self._in_session and current_a < -self.charge_current_a and self._charging_s >= self.charge_session_s:
+            self._in_session = True
+            self.sessions_ended += 1
+            self._reset_cycle()
+            return True
+        return False
+
+    @property
+    def in_session(self) -> bool:
+        """True from the start of a charging session until the next discharge."""
+        return self._in_session
+
+    def estimate(self) -> LoadEstimate:
+        """The present estimate."""
+        if self.estimator == "ewma":
+            mean = self._ewma_sum / self._ewma_weight if self._ewma_weight > 0 else math.nan
+        else:
+            mean = self._charge_as / self._duration_s if self._duration_s > 0 else math.nan
+        charging = self._in_session and self._last_current_a < -self.charge_current_a
+        return LoadEstimate(mean, self._duration_s, charging, self._last_current_a if charging else math.nan)
+
+    def quantile_a(self, q: float) -> float:
+        """Quantile ``q`` of the cycle's window currents, A (NaN when none or ``q <= 0``)."""
+        if not self.currents or q <= 0:
+            return math.nan
+        return float(np.quantile(np.fromiter(self.currents, float), min(q, 1.0)))

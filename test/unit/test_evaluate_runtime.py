@@ -1,0 +1,104 @@
+"""``evaluate-runtime``: truth from the recording, the predictor's core and the counters side by side."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from battery_predictor.cli.cmd_evaluate_runtime import parse_checkpoints
+from battery_predictor.errors import InputDataError
+from battery_predictor.evaluation.runtime_eval import Windows, counter_remaining_s, error_summary, find_discharge
+from battery_predictor.params import load_params
+from battery_predictor.prediction.cell_runner import PackRunner
+
+REPO = Path(__file__).resolve().parents[2]
+CLI = REPO / ".venv" / "bin" / "battery-predictor"
+PARAMS = REPO / "params" / "panasonic_18650pf.yaml"
+
+
+def windows(time_s, voltage_v, current_a) -> Windows:
+    t = np.asarray(time_s, float)
+    return Windows(t, np.asarray(voltage_v, float), np.asarray(current_a, float), np.full(t.size, math.nan))
+
+
+def test_discharge_ends_at_the_first_window_at_the_cutoff():
+    t = np.arange(5.0, 100.0, 5.0)
+    v = np.linspace(4.1, 2.4, t.size)
+    d = find_discharge(windows(t, v, np.full(t.size, 2.0)), 2.5, start_current_a=0.05, end_margin_v=0.5)
+    assert d.ended_by == "cutoff_window" and d.end_s == t[np.argmax(v <= 2.5)] and d.start_s == 0.0
+
+
+def test_discharge_that_stops_near_the_cutoff_ends_there_and_one_far_from_it_is_unknown():
+    t = np.arange(5.0, 200.0, 5.0)
+    i = np.where(t < 100.0, 2.0, 0.0)
+    v = np.where(t < 100.0, 4.1 - 1.4 * t / 100.0, 3.3)
+    assert find_discharge(windows(t, v, i), 2.5, start_current_a=0.05, end_margin_v=0.5).ended_by == "discharge_end"
+    far = find_discharge(windows(t, v + 0.6, i), 2.5, start_current_a=0.05, end_margin_v=0.5)
+    assert far.ended_by == "unknown" and not far.known
+
+
+def test_counter_divides_the_charge_left_by_the_mean_current():
+    t = np.arange(5.0, 3605.0, 5.0)
+    win = windows(t, np.full(t.size, 3.6), np.full(t.size, 1.0))
+    assert counter_remaining_s(win, 0.0, 1800.0, 2.0) == pytest.approx(1.5 * 3600.0)
+
+
+def test_error_summary_scores_only_answered_checkpoints_with_a_truth():
+    s = error_summary([(600.0, 660.0), (math.nan, 300.0), (120.0, math.nan)])
+    assert (s["checkpoints"], s["answered"]) == (2, 1)
+    assert s["mae_min"] == pytest.approx(1.0) and s["bias_min"] == pytest.approx(-1.0)
+
+
+def test_checkpoints_parse_ranges_and_lists_and_refuse_nonsense():
+    assert parse_checkpoints("0.1:0.9:0.2") == (0.1, 0.3, 0.5, 0.7, 0.9)
+    assert parse_checkpoints("0.25,0.5") == (0.25, 0.5)
+    for bad in ("0:1:0.5", "a:b:c", "0.5:0.9:0", "1.5"):
+        with pytest.raises(InputDataError, match="--checkpoints"):
+            parse_checkpoints(bad)
+
+
+@pytest.fixture(scope="module")
+def model_discharge_csv(tmp_path_factory) -> Path:
+    """A 1C discharge of the params' own model to 2.5 V, then 300 s of rest, sampled every second."""
+    runner = PackRunner(load_params(PARAMS))
+    run = runner.run(0.98, [(5000.0, 2.9)], 298.15)
+    assert run.reached_cutoff
+    t = np.arange(0.0, run.end_time_s, 1.0)
+    v = np.interp(t, run.time_s, run.pack_voltage_v)
+    rest = runner.run(run.final_state, [(300.0, 0.0)], 298.15)
+    t_rest = t[-1] + 1.0 + np.arange(0.0, 300.0, 1.0)
+    v_rest = np.interp(t_rest - t_rest[0], rest.time_s, rest.pack_voltage_v)
+    path = tmp_path_factory.mktemp("evrt") / "model_1c.csv"
+    rows = ["time_s,voltage_V,current_A"] + [f"{a:.1f},{b:.5f},2.9" for a, b in zip(t, v)] + \
+        [f"{a:.1f},{b:.5f},0.0" for a, b in zip(t_rest, v_rest)]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def test_cli_scores_the_predictor_and_the_counters_on_a_discharge(model_discharge_csv, tmp_path):
+    out = tmp_path / "report"
+    proc = subprocess.run([str(CLI), "evaluate-runtime", "--params", str(PARAMS), "--data", str(model_discharge_csv),
+                           "--checkpoints", "0.2:0.8:0.3", "--capacity-ah", "2.6", "--json", "--out", str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    pooled = summary["pooled"]
+    assert set(pooled) == {"predictor", "counter[nominal]", "counter[given]"}
+    assert pooled["predictor"]["answered"] == pooled["predictor"]["checkpoints"] == 3
+    discharge_min = summary["per_recording"][0]["discharge_min"]
+    assert pooled["predictor"]["mae_min"] < 0.05 * discharge_min  # its own model: close to the truth
+    assert (out / "summary.json").is_file() and (out / "runtime.png").stat().st_size > 1000
+    rows = json.loads((out / "checkpoints.json").read_text())
+    assert [r["fraction"] for r in rows] == [0.2, 0.5, 0.8]
+
+
+def test_cli_refuses_bad_checkpoints_in_one_line(model_discharge_csv):
+    proc = subprocess.run([str(CLI), "evaluate-runtime", "--params", str(PARAMS), "--data", str(model_discharge_csv),
+                           "--checkpoints", "0.5:2"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and "--checkpoints" in proc.stderr

@@ -1,0 +1,107 @@
+"""Load estimation of the present discharge cycle: regen and blips stay in it, charging sessions end it."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from battery_predictor.io.loader import load_recording
+from battery_predictor.monitoring import monitor_windows
+from battery_predictor.prediction.load_estimate import LoadEstimator
+
+PANASONIC = Path(__file__).resolve().parents[3] / "shared" / "data" / "panasonic_18650pf"
+
+
+def feed(est: LoadEstimator, time_s, current_a) -> int:
+    """Feed samples; returns how many charging sessions began."""
+    return sum(est.add(float(t), float(i)) for t, i in zip(time_s, current_a))
+
+
+def net_mean_a(time_s, current_a, charge_current_a: float = 0.2) -> float:
+    """Time-weighted mean current from the first discharge on (each window holds until the next)."""
+    t, i = np.asarray(time_s, float), np.asarray(current_a, float)
+    first = int(np.argmax(i > charge_current_a))
+    t, i = t[first:], i[first:]
+    return float(np.sum(np.diff(t) * i[:-1]) / (t[-1] - t[0]))
+
+
+def test_regen_pulses_stay_in_the_cycle_and_enter_the_mean_as_negative_current():
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 3600.0, 5.0)
+    i = np.where(rng.random(t.size) < 0.2, -rng.uniform(0.5, 4.0, t.size), rng.uniform(0.5, 6.0, t.size))
+    est = LoadEstimator(charge_current_a=0.2)
+    assert feed(est, t, i) == 0
+    assert est.estimate().mean_current_a == pytest.approx(net_mean_a(t, i), rel=1e-9)
+    assert not est.estimate().charging
+
+
+def test_rest_before_the_first_discharge_is_not_part_of_the_load():
+    t = np.arange(0.0, 7200.0, 5.0)
+    i = np.where(t < 3600.0, 0.0, 2.0)  # an hour's soak, then a 2 A discharge
+    est = LoadEstimator(charge_current_a=0.2)
+    feed(est, t, i)
+    assert est.estimate().mean_current_a == pytest.approx(2.0)
+
+
+def test_a_charging_session_ends_the_cycle_and_the_next_discharge_starts_afresh():
+    est = LoadEstimator(charge_current_a=0.2, charge_session_s=300.0)
+    feed(est, np.arange(0.0, 600.0, 5.0), np.full(120, 3.0))
+    assert est.estimate().mean_current_a == pytest.approx(3.0)
+    began = feed(est, np.arange(600.0, 1200.0, 5.0), np.full(120, -4.0))
+    assert began == 1 and est.estimate().charging and est.estimate().charging_current_a == -4.0
+    feed(est, np.arange(1200.0, 1300.0, 5.0), np.full(20, 1.0))
+    after = est.estimate()
+    assert not after.charging and after.mean_current_a == pytest.approx(1.0)
+    assert after.duration_s == pytest.approx(95.0)
+
+
+def test_charging_shorter_than_a_session_is_a_blip_not_a_new_cycle():
+    est = LoadEstimator(charge_current_a=0.2, charge_session_s=300.0)
+    t = np.arange(0.0, 1200.0, 5.0)
+    i = np.full(t.size, 2.0)
+    i[(t >= 400) & (t < 690)] = -3.0  # 290 s of charging: below the session length
+    assert feed(est, t, i) == 0
+    assert est.estimate().mean_current_a == pytest.approx(net_mean_a(t, i), rel=1e-9)
+
+
+def test_ewma_follows_a_change_of_usage_the_cycle_mean_does_not():
+    t = np.arange(0.0, 4 * 3600.0, 5.0)
+    i = np.where(t < 2 * 3600.0, 1.0, 4.0)
+    cycle, ewma = LoadEstimator(0.2), LoadEstimator(0.2, estimator="ewma", time_constant_s=900.0)
+    feed(cycle, t, i)
+    feed(ewma, t, i)
+    assert cycle.estimate().mean_current_a == pytest.approx(2.5, abs=0.01)
+    assert ewma.estimate().mean_current_a == pytest.approx(4.0, abs=0.01)
+
+
+def test_young_ewma_equals_the_cycle_mean():
+    t = np.arange(0.0, 60.0, 5.0)
+    i = np.linspace(1.0, 3.0, t.size)
+    cycle, ewma = LoadEstimator(0.2), LoadEstimator(0.2, estimator="ewma", time_constant_s=1e6)
+    feed(cycle, t, i)
+    feed(ewma, t, i)
+    assert ewma.estimate().mean_current_a == pytest.approx(cycle.estimate().mean_current_a, rel=1e-4)
+
+
+def test_no_sample_gives_no_estimate_and_an_unknown_estimator_is_refused():
+    assert math.isnan(LoadEstimator(0.2).estimate().mean_current_a)
+    with pytest.raises(ValueError, match="not one of"):
+        LoadEstimator(0.2, estimator="median")
+
+
+@pytest.mark.skipif(not PANASONIC.is_dir(), reason="measured data not available (../shared/data)")
+def test_regen_on_a_measured_drive_cycle_does_not_reset_the_load_estimate():
+    rec = load_recording(PANASONIC / "drive_T25C_US06.csv")
+    windows = monitor_windows(rec.time_s, rec.voltage_v, rec.current_a)
+    t = np.array([w.stamp_s for w in windows])
+    i = np.array([w.current_a for w in windows])
+    assert np.sum(i < -0.2) > 50, "the drive cycle has regen windows"
+    est = LoadEstimator(charge_current_a=0.2)
+    discharge = t <= t[0] + 0.6 * (t[-1] - t[0])
+    assert feed(est, t[discharge], i[discharge]) == 0
+    estimate = est.estimate().mean_current_a
+    assert estimate == pytest.approx(net_mean_a(t[discharge], i[discharge]), rel=1e-9)
+    assert 1.0 < estimate < 3.0  # a US06 cell load, not a few seconds' worth

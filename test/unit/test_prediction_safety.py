@@ -1,0 +1,152 @@
+"""Safety invariants of the predictor core: the measurement has the last word, jumps recalibrate, the
+message contract holds, numeric failures are invalid answers with a reason."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from battery_predictor.prediction import runtime as runtime_module
+from battery_predictor.prediction.calibration import calibrate_soc
+from battery_predictor.prediction.core import (
+    STATUS_BELOW_CUTOFF,
+    STATUS_CHARGING,
+    STATUS_MODEL_FAILED,
+    STATUS_NO_LOAD,
+    STATUS_OK,
+    PredictorConfig,
+    PredictorCore,
+    published_soc,
+)
+from battery_predictor.prediction.safety import standstill_voltage_v, unexplained_jump_v
+from battery_predictor.profiles.ranger import longest_route
+
+PARAMS = Path(__file__).resolve().parents[2] / "params"
+T_K = 298.15
+
+
+def ranger() -> PredictorCore:
+    return PredictorCore(PredictorConfig(params_file=str(PARAMS / "ranger_mini.yaml")))
+
+
+def temi() -> PredictorCore:
+    return PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml")))
+
+
+def feed(core: PredictorCore, start_s: float, end_s: float, voltage_v: float, current_a: float,
+         step_s: float = 5.0) -> float:
+    t = start_s
+    while t < end_s:
+        core.update_state(t, voltage_v, current_a, T_K)
+        t += step_s
+    return t - step_s
+
+
+def test_standstill_correction_and_unexplained_jump_follow_ohms_law():
+    assert standstill_voltage_v(46.0, 7.0, 1.7, 0.1) == pytest.approx(46.53)
+    assert unexplained_jump_v((50.0, 3.0), (49.0, 13.0), 0.1) == pytest.approx(0.0)
+    assert unexplained_jump_v((49.8, 3.0), (44.0, 3.0), 0.1) == pytest.approx(5.8)
+
+
+def test_route_rejected_when_the_measured_voltage_contradicts_the_threshold():
+    core = ranger()
+    last = feed(core, 0.0, 30.0, 49.8, 3.0)
+    assert core.can_accept_route(longest_route(80).sections, last + 1).accepted  # a charged pack
+    last = feed(core, 30.0, 60.0, 44.0, 3.0)
+    decision = core.can_accept_route(longest_route(80).sections, last + 1)
+    assert not decision.accepted
+    assert "already below the route threshold 46.31 V" in decision.reason and "44.00 V" in decision.reason
+    runtime = core.remaining_runtime(last + 1)
+    assert (runtime.valid, runtime.status, runtime.remaining_s) == (False, STATUS_BELOW_CUTOFF, 0.0)
+    last = feed(core, 60.0, 90.0, 46.5, 7.0)
+    late = core.can_accept_route(longest_route(80).sections, last + 1)
+    assert not late.accepted, late.reason
+    assert core.events, "the jumps were recorded"
+
+
+def test_a_battery_swap_recalibrates_within_one_update():
+    core = ranger()
+    for t0, v in ((0.0, 49.8), (60.0, 52.0), (120.0, 46.0)):
+        last = feed(core, t0, t0 + 60.0, v, 1.7)
+        fresh = calibrate_soc(core.runner, v, 1.7, T_K)
+        core.update_state(last + 0.5, v, 1.7, T_K)
+        soc = core.calibration(T_K).soc
+        assert soc == pytest.approx(fresh.soc, abs=0.02), f"{v} V: {soc} vs {fresh.soc}"
+    assert sum("jumped" in why for _, why in core.events) == 2
+
+
+def test_propagated_state_is_dropped_when_it_drifts_from_the_measurement():
+    core = temi()
+    last = feed(core, 0.0, 900.0, 15.2, 2.0)
+    first = core.calibration(T_K)
+    assert abs(first.latest_residual_v) < core.state_tolerance_v
+    v = 15.2
+    for k in range(60):  # 0.03 V per window: no jump, but 1.8 V of drift that charge counting cannot explain
+        v -= 0.03
+        core.update_state(last + 5.0 * (k + 1), v, 2.0, T_K)
+        if k % 4 == 3:  # a runtime update every 20 s
+            cal = core.calibration(T_K)
+    assert any("propagated state" in why for _, why in core.events)
+    assert abs(cal.latest_residual_v) < core.state_tolerance_v
+    assert cal.soc < first.soc - 0.1
+
+
+def test_a_node_started_on_the_charger_reports_charging_then_calibrates_afresh():
+    core = temi()
+    last = feed(core, 0.0, 200.0, 16.6, -4.0)
+    assert core.remaining_runtime(last + 1).status == STATUS_NO_LOAD  # not yet a session, no discharge seen
+    last = feed(core, 200.0, 700.0, 16.6, -4.0)
+    charging = core.remaining_runtime(last + 1)
+    assert (charging.valid, charging.status) == (False, STATUS_CHARGING)
+    last = feed(core, 700.0, 1300.0, 15.9, 2.5)
+    runtime = core.remaining_runtime(last + 1)
+    assert runtime.valid and runtime.status == STATUS_OK and 0.0 <= runtime.state_of_charge <= 1.0
+    assert any("charging session ended" in why for _, why in core.events)
+
+
+def test_non_convergence_of_the_runtime_search_is_an_invalid_answer_with_reason(monkeypatch):
+    class NotConverged:
+        converged = False
+
+    monkeypatch.setattr(runtime_module, "brentq", lambda f, a, b, **kw: (0.5 * (a + b), NotConverged()))
+    core = temi()
+    rng = np.random.default_rng(0)
+    for k in range(240):  # a load with peaks: the peak-load search runs
+        core.update_state(5.0 * k, 15.0, float(rng.choice([1.0, 1.5, 9.0], p=[0.5, 0.45, 0.05])), T_K)
+    runtime = core.remaining_runtime(5.0 * 239 + 1)
+    assert (runtime.valid, runtime.status) == (False, STATUS_MODEL_FAILED)
+    assert "did not converge" in runtime.reason and math.isnan(runtime.remaining_s)
+
+
+def test_published_soc_is_clamped_with_the_models_value_in_the_note():
+    assert published_soc(1.014) == (1.0, "model SOC 1.014 (above the 100 % OCV point)")
+    assert published_soc(-0.086) == (0.0, "model SOC -0.086 (below the 0 % OCV point)")
+    assert published_soc(0.5) == (0.5, "")
+
+
+def test_valid_exactly_when_status_ok_over_a_fuzzed_stream():
+    core = temi()
+    rng = np.random.default_rng(20261124)
+    t, seen = 0.0, set()
+    for _ in range(60):
+        kind = rng.choice(["discharge", "regen", "charge", "idle", "jump", "gap", "nan"],
+                          p=[0.45, 0.1, 0.15, 0.1, 0.08, 0.07, 0.05])
+        t += {"gap": 60.0}.get(kind, 5.0)
+        v = {"jump": rng.uniform(11.0, 17.5), "charge": rng.uniform(16.0, 16.8)}.get(kind, rng.uniform(13.2, 16.4))
+        i = {"regen": -rng.uniform(0.3, 3.0), "charge": -rng.uniform(1.0, 5.0), "idle": 0.0,
+             "nan": math.nan}.get(kind, rng.uniform(0.5, 8.0))
+        core.update_state(t, v, i, T_K)
+        answer = core.remaining_runtime(t + rng.uniform(0.0, 40.0))
+        seen.add(answer.status)
+        assert answer.valid == (answer.status == STATUS_OK), answer
+        assert math.isnan(answer.state_of_charge) or 0.0 <= answer.state_of_charge <= 1.0, answer
+        if answer.valid:
+            assert math.isfinite(answer.remaining_s) and answer.remaining_s >= 0 and answer.reason
+            if answer.remaining_s == 0:
+                assert "load peak now" in answer.reason
+        else:
+            assert answer.reason
+    assert len(seen) >= 3, seen
