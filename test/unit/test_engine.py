@@ -212,3 +212,40 @@ def test_fused_kernel_matches_the_numpy_path_including_the_cutoff(temi_spm):
     np.testing.assert_allclose(fused.end_time_s, plain.end_time_s, rtol=0, atol=1e-6)
     np.testing.assert_allclose(fused.start_voltage_v, plain.start_voltage_v, rtol=0, atol=1e-10)
     np.testing.assert_allclose(fused.end_voltage_v, plain.end_voltage_v, rtol=0, atol=1e-10)
+
+
+class _StubSimulator:
+    name = "stub"
+
+    def simulate(self, params, request):
+        from battery_predictor.simulation.base import PackSimResult
+
+        return PackSimResult(np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1), "end_of_load", 0.0)
+
+
+def test_simulator_falls_back_visibly_for_what_the_engine_does_not_cover(temi_params, caplog):
+    from battery_predictor.simulation import SimulationRequest, StepLoad
+    from battery_predictor.simulation.engine.simulator import EngineSimulator
+
+    request = SimulationRequest(load=StepLoad.constant(3.0, 60.0), initial_soc=0.5)
+    params = temi_params.with_values({}, extensions=("resistance_growth",))
+    with caplog.at_level("WARNING"):
+        result = EngineSimulator(fallback=_StubSimulator()).simulate(params, request)
+    assert result.extra["engine_fallback"].startswith("stub: ")
+    assert "simulating with the stub simulator" in caplog.text
+    with pytest.raises(SimulationError, match="engine: "):
+        EngineSimulator(fallback=None).simulate(params, request)
+
+
+def test_simulator_reuses_one_extraction_for_scalable_parameter_changes(temi_params):
+    from battery_predictor.simulation import SimulationRequest, StepLoad
+    from battery_predictor.simulation.engine.simulator import EngineSimulator
+
+    sim = EngineSimulator(fallback=None)
+    request = SimulationRequest(load=StepLoad.constant(6.0, 600.0), initial_soc=0.5)
+    base = sim.simulate(temi_params, request)
+    thinner = sim.simulate(temi_params.with_values({"Positive electrode thickness [m]": 1.0e-4,
+                                                    "Electrode height [m]": 0.85}), request)
+    assert sim.extractions == 1
+    assert base.extra["engine_seconds"] < base.seconds
+    assert thinner.pack_voltage_v[-1] < base.pack_voltage_v[-1]  # less positive material: deeper discharge
