@@ -1,7 +1,13 @@
-"""Declaring ROS parameters with descriptors (description and range), and resolving file parameters."""
+"""Declaring ROS parameters with descriptors (description and range), and resolving file parameters.
+
+Parameters declared here are read-only: the nodes read them once at start-up, so a parameter service
+call (``ros2 param set``) is refused instead of being accepted and ignored. Pass ``read_only=False``
+for a parameter the node applies when it changes.
+"""
 
 from __future__ import annotations
 
+import difflib
 import os
 import sys
 from pathlib import Path
@@ -10,8 +16,11 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from battery_predictor.errors import ParamsError
 
-def declare_float(node: Node, name: str, default: float, description: str, low: float, high: float) -> float:
+
+def declare_float(node: Node, name: str, default: float, description: str, low: float, high: float, *,
+                  read_only: bool = True) -> float:
     """Declare a double parameter with a FloatingPointRange ``[low, high]``; returns its value.
 
     An integer given for it (``window_s: 5`` in a params file, ``-p window_s:=5``) is taken as a double
@@ -21,22 +30,24 @@ def declare_float(node: Node, name: str, default: float, description: str, low: 
     given = overrides.get(name)
     if given is not None and given.type_ == Parameter.Type.INTEGER:
         overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(given.value))
-    descriptor = ParameterDescriptor(description=description, floating_point_range=[
+    descriptor = ParameterDescriptor(description=description, read_only=read_only, floating_point_range=[
         FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)])
     return float(node.declare_parameter(name, float(default), descriptor).value)
 
 
-def declare_int(node: Node, name: str, default: int, description: str, low: int, high: int) -> int:
+def declare_int(node: Node, name: str, default: int, description: str, low: int, high: int, *,
+                read_only: bool = True) -> int:
     """Declare an integer parameter with an IntegerRange ``[low, high]``; returns its value."""
-    descriptor = ParameterDescriptor(description=description, integer_range=[
+    descriptor = ParameterDescriptor(description=description, read_only=read_only, integer_range=[
         IntegerRange(from_value=int(low), to_value=int(high), step=1)])
     return int(node.declare_parameter(name, int(default), descriptor).value)
 
 
-def declare_str(node: Node, name: str, default: str, description: str, choices: tuple[str, ...] = ()) -> str:
+def declare_str(node: Node, name: str, default: str, description: str, choices: tuple[str, ...] = (), *,
+                read_only: bool = True) -> str:
     """Declare a string parameter (``choices`` are listed in the description and enforced)."""
     text = description + (f" One of: {', '.join(choices)}." if choices else "")
-    descriptor = ParameterDescriptor(description=text, additional_constraints=(
+    descriptor = ParameterDescriptor(description=text, read_only=read_only, additional_constraints=(
         f"one of {', '.join(choices)}" if choices else ""))
     value = str(node.declare_parameter(name, default, descriptor).value)
     if choices and value not in choices:
@@ -44,15 +55,34 @@ def declare_str(node: Node, name: str, default: str, description: str, choices: 
     return value
 
 
-def declare_bool(node: Node, name: str, default: bool, description: str) -> bool:
+def declare_bool(node: Node, name: str, default: bool, description: str, *, read_only: bool = True) -> bool:
     """Declare a boolean parameter."""
-    return bool(node.declare_parameter(name, bool(default), ParameterDescriptor(description=description)).value)
+    descriptor = ParameterDescriptor(description=description, read_only=read_only)
+    return bool(node.declare_parameter(name, bool(default), descriptor).value)
 
 
 def undeclared_overrides(node: Node) -> list[str]:
     """Parameter names given to the node (params file, ``-p``) that it never declared: typos, usually."""
     declared = set(node._parameters)  # rclpy has no public accessor
     return sorted(name for name in node._parameter_overrides if name not in declared)
+
+
+def reject_undeclared(node: Node) -> None:
+    """Raise :class:`ParamsError` naming every parameter given to ``node`` that it does not declare.
+
+    Call it after the last ``declare_*``: a misspelled parameter stops the node at start-up (with the
+    declared name it most resembles) instead of leaving the default in force.
+    """
+    unknown = undeclared_overrides(node)
+    if not unknown:
+        return
+    declared = sorted(node._parameters)  # rclpy has no public accessor
+    named = []
+    for name in unknown:
+        close = difflib.get_close_matches(name, declared, n=1)
+        named.append(f"'{name}'" + (f" (did you mean '{close[0]}'?)" if close else ""))
+    raise ParamsError(f"{node.get_name()}: unknown parameter{'s' if len(named) > 1 else ''} {', '.join(named)}; "
+                      f"see 'ros2 param describe' or params/ros/*.yaml for the declared ones")
 
 
 def packaged_params_dirs() -> list[Path]:

@@ -38,7 +38,7 @@ from std_msgs.msg import Float64
 
 from battery_predictor.conventions import battery_state_current_to_internal, celsius_to_kelvin
 from battery_predictor.monitoring import STYLES, BatteryMonitor, MonitorConfig, PackSnapshot
-from battery_predictor.nodes._params import declare_float, declare_str, undeclared_overrides
+from battery_predictor.nodes._params import declare_float, declare_str, reject_undeclared, resolve_params_file
 from battery_predictor.nodes._sync import TimerProbe
 from battery_predictor.nodes.messages import pack_state_msg, stamp_to_s
 
@@ -65,8 +65,8 @@ class BatteryMonitorNode(Node):
                  **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         self.config, topics = self._declare_parameters()
-        for name in undeclared_overrides(self):
-            self.get_logger().warning(f"parameter '{name}' is set but not used by this node (typo?)")
+        reject_undeclared(self)
+        self._check_against_pack()
         self.monitor = BatteryMonitor(self.config)
         self._lock = threading.Lock()
         #: Messages received per input (for lock-step replays and tests).
@@ -116,6 +116,10 @@ class BatteryMonitorNode(Node):
             "diagnostics": declare_str(self, "diagnostics_topic", "/diagnostics",
                                        "Output topic of diagnostic_msgs/DiagnosticArray."),
         }
+        self.params_file = declare_str(
+            self, "params_file", "",
+            "Pack params file (bundled name or path) the voltage range must cover; checked at start-up. "
+            "Empty: no check. A '/**' section can give the predictor's params_file to both nodes.")
         self.frame_id = declare_str(self, "frame_id", "battery", "frame_id of the published PackState headers.")
         self.hardware_id = declare_str(self, "hardware_id", "battery_pack", "hardware_id in the diagnostics.")
         self._diagnostics_period_s = declare_float(
@@ -153,6 +157,17 @@ class BatteryMonitorNode(Node):
                                        0.0, 86400.0),
         )
         return config, topics
+
+    def _check_against_pack(self) -> None:
+        """Refuse to start when ``params_file`` is given and its pack's voltage window is outside the range."""
+        if not self.params_file:
+            return
+        from battery_predictor.params import load_params
+        from battery_predictor.params_checks import check_monitor_range
+
+        params = load_params(resolve_params_file(self.params_file))
+        check_monitor_range(self.config.min_voltage_v, self.config.max_voltage_v, params,
+                            f"parameters of node '{self.get_name()}'")
 
     # --------------------------------------------------------------- helpers
     def _now_s(self) -> float:

@@ -98,9 +98,12 @@ def test_missing_pack_params_make_every_answer_a_reasoned_refusal(ros_context: C
 
 
 def test_run_arguments_check_the_params_file(tmp_path: Path) -> None:
-    args = ros_arguments(str(NODE_PARAMS[0]), pack="my_fit.yaml", use_sim_time=True)
-    assert args[1:4] == ["--ros-args", "--params-file", str(NODE_PARAMS[0])]
-    assert "predictor:params_file:=my_fit.yaml" in args and "use_sim_time:=true" in args
+    fit = REPO / "docs" / "evaluation" / "ranger_fit_stepwise.yaml"
+    args = ros_arguments(str(REPO / "params" / "ros" / "ranger_nodes.yaml"), pack=str(fit), use_sim_time=True)
+    assert args[1:4] == ["--ros-args", "--params-file", str(REPO / "params" / "ros" / "ranger_nodes.yaml")]
+    assert f"predictor:params_file:={fit}" in args and "use_sim_time:=true" in args
+    with pytest.raises(ParamsError, match="'my_fit.yaml': pack params file not found"):
+        ros_arguments(str(NODE_PARAMS[0]), pack="my_fit.yaml")
     with pytest.raises(ParamsError, match="pack params file"):
         ros_arguments(str(REPO / "params" / "temi.yaml"))
     bad = tmp_path / "bad.yaml"

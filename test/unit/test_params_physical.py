@@ -24,9 +24,9 @@ def test_every_shipped_pack_file_and_shipped_fit_passes():
         load_params(path)
 
 
-@pytest.mark.parametrize("name", ["temi_nodes.yaml", "ranger_nodes.yaml"])
-def test_shipped_node_params_fit_their_packs(name):
-    check_node_params_file(str(REPO / "params" / "ros" / name))
+@pytest.mark.parametrize("path", sorted((REPO / "params" / "ros").glob("*_nodes.yaml")), ids=lambda p: p.name)
+def test_shipped_node_params_fit_their_packs(path):
+    check_node_params_file(str(path))
 
 
 def _load_changed(tmp_path: Path, mutate, base: str = "temi.yaml"):
