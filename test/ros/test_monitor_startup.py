@@ -69,3 +69,19 @@ def test_console_script_with_a_typo_exits_2_with_one_line(ros_domain_id: int) ->
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "Traceback" not in proc.stderr
     assert "unknown parameter 'windw_s' (did you mean 'window_s'?)" in lines[0]
+
+
+def test_every_declared_parameter_of_both_nodes_is_read_only(ros_context: Context) -> None:
+    from battery_predictor.nodes.predictor_node import PredictorNode
+
+    nodes = [_monitor(ros_context, TEMI_NODES),
+             PredictorNode(context=ros_context, cli_args=["--ros-args", "--params-file", str(TEMI_NODES)])]
+    try:
+        for node in nodes:
+            names = [n for n in node._parameters if n != "use_sim_time"]  # noqa: SLF001 - rclpy has no accessor
+            assert len(names) > 5
+            writable = [n for n in names if not node.describe_parameter(n).read_only]
+            assert writable == [], f"{node.get_name()}: {writable}"
+    finally:
+        for node in nodes:
+            node.destroy_node()
