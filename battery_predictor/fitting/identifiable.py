@@ -1,0 +1,438 @@
+"""Identifiable coordinates of a pack model and their one mapping back to PyBaMM parameters.
+
+Drive cycles determine a handful of combinations of the SPM's parameters, not the raw values
+(thickness and active fraction of an electrode enter only as their product, electrode height
+trades against both, a maximum concentration against its initial concentration). The fit
+therefore searches in the combinations themselves:
+
+========================== ====== ===================================================================
+coordinate                 scale  meaning (per cell unless stated)
+========================== ====== ===================================================================
+negative_capacity_ah       log    ``F eps_n L_n A c_n,max / 3600``: the negative electrode's capacity
+positive_capacity_ah       log    same for the positive electrode
+negative_stoichiometry     lin    negative stoichiometry ``x`` at the start of the first recording
+series_resistance_ohm      log    pack series resistance outside the cell model (interconnect ``R_eq``)
+negative_diffusivity_m2_s  log    optional transport group (particle diffusivity)
+positive_diffusivity_m2_s  log    optional transport group
+initial_ocv_v:<k>          lin    open-circuit cell voltage at the start of recording ``k`` (state)
+========================== ====== ===================================================================
+
+The first recording's positive stoichiometry follows from its initial OCV (``U_p(y) - U_n(x) =
+OCV``); together they fix the cyclable lithium ``Q_Li = x Q_n + y Q_p``, which is shared: every
+further recording starts at the pair ``(x, y)`` on ``x Q_n + y Q_p = Q_Li`` with its own OCV. So
+each electrode's initial stoichiometry and capacity and the series resistance - the combinations
+an analysis of the model's sensitivities finds determined by drive cycles - are coordinates, and
+every point of the search box with a plausible OCV is a feasible cell.
+:func:`pybamm_values` maps coordinates to PyBaMM / interconnect values; it is the only place
+that does so. Geometry (electrode height, width, thickness) and maximum concentrations stay as
+in the params; capacities move the active material volume fractions (and the thickness only
+where a fraction would exceed :data:`MAX_ACTIVE_FRACTION`).
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+import math
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from battery_predictor.errors import ParamsError, SimulationError
+from battery_predictor.params import INTERCONNECT_KEYS, PackParams
+from battery_predictor.recording import Recording
+
+#: Faraday constant in C/mol.
+FARADAY_C_MOL = 96485.33212
+#: Active material volume fractions above this are written as a thicker electrode instead.
+MAX_ACTIVE_FRACTION = 0.85
+#: Electrode capacities and lithium inventory: searched within these multiples of the nominal
+#: cell capacity (and never below the charge the data draw from one cell).
+CAPACITY_FACTORS = (0.3, 5.0)
+#: Series resistance: from ~0 (this many Ohm per cell) ...
+MIN_RESISTANCE_OHM_PER_CELL = 1e-5
+#: ... to the larger of this many times the params' value and this many Ohm per cell.
+RESISTANCE_FACTOR_HIGH = 10.0
+MAX_RESISTANCE_OHM_PER_CELL = 0.2
+#: Diffusivities: searched within these multiples of the params' value (log scale).
+DIFFUSIVITY_FACTORS = (0.01, 100.0)
+#: Initial OCV of a recording: searched this far (V per cell) below and above its first voltage.
+INITIAL_OCV_MARGIN_V = (0.15, 0.35)
+#: Stoichiometry grid on which the OCPs are tabulated.
+_STO_GRID = np.linspace(1e-4, 1.0 - 1e-4, 2001)
+
+CORE_COORDINATES = ("negative_capacity_ah", "positive_capacity_ah", "negative_stoichiometry",
+                    "series_resistance_ohm")
+#: Negative stoichiometry at the start of the first recording: searched within this range.
+NEGATIVE_STOICHIOMETRY_RANGE = (0.2, 0.999)
+OPTIONAL_COORDINATES = ("negative_diffusivity_m2_s", "positive_diffusivity_m2_s")
+_ELECTRODES = {"negative": "Negative", "positive": "Positive"}
+_DIFFUSIVITY_KEYS = {"negative_diffusivity_m2_s": "Negative particle diffusivity [m2.s-1]",
+                     "positive_diffusivity_m2_s": "Positive particle diffusivity [m2.s-1]"}
+
+
+@dataclass(frozen=True)
+class Coordinate:
+    """One searched coordinate.
+
+    Attributes
+    ----------
+    name : str
+        Coordinate name (see the module table); state coordinates end in ``:<recording index>``.
+    initial : float
+        Start value (from the params, or from the data for a state).
+    low, high : float
+        Search bounds in the coordinate's unit.
+    log : bool
+        Searched on a log scale.
+    recording : int or None
+        Index of the recording a state coordinate belongs to; None for shared coordinates.
+    """
+
+    name: str
+    initial: float
+    low: float
+    high: float
+    log: bool
+    recording: int | None = None
+
+    def to_unit(self, value: float) -> float:
+        """Position of ``value`` in the unit interval of the search box (0 = low, 1 = high)."""
+        if self.log:
+            return (math.log(value) - math.log(self.low)) / (math.log(self.high) - math.log(self.low))
+        return (value - self.low) / (self.high - self.low)
+
+    def from_unit(self, unit: float) -> float:
+        """Inverse of :meth:`to_unit`."""
+        unit = min(max(float(unit), 0.0), 1.0)
+        if self.log:
+            return math.exp(math.log(self.low) + unit * (math.log(self.high) - math.log(self.low)))
+        return self.low + unit * (self.high - self.low)
+
+    def contains(self, value: float) -> bool:
+        """True when ``low <= value <= high``."""
+        return self.low <= value <= self.high
+
+
+@dataclass(frozen=True)
+class ElectrodeBasis:
+    """The parts of the params the mapping keeps fixed (per cell).
+
+    Attributes
+    ----------
+    ah_per_m : dict
+        ``F A c_max / 3600`` per electrode (Ah per metre of ``eps * L``).
+    thickness_m, fraction : dict
+        The params' thickness (m) and active material volume fraction per electrode.
+    c_max_mol_m3 : dict
+        Maximum concentration per electrode (mol/m3).
+    r_eq_ohm : float
+        The params' interconnect ``R_eq`` (Ohm, pack).
+    """
+
+    ah_per_m: dict[str, float]
+    thickness_m: dict[str, float]
+    fraction: dict[str, float]
+    c_max_mol_m3: dict[str, float]
+    r_eq_ohm: float
+
+
+def electrode_basis(params: PackParams) -> ElectrodeBasis:
+    """The fixed geometry of ``params`` that :func:`pybamm_values` scales."""
+    from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+    pv = params.parameter_values()
+    area_m2 = float(pv["Electrode height [m]"]) * float(pv["Electrode width [m]"])
+    ah_per_m, thickness, fraction, c_max = {}, {}, {}, {}
+    for key, cap in _ELECTRODES.items():
+        c_max[key] = float(pv[f"Maximum concentration in {key} electrode [mol.m-3]"])
+        thickness[key] = float(pv[f"{cap} electrode thickness [m]"])
+        fraction[key] = float(pv[f"{cap} electrode active material volume fraction"])
+        ah_per_m[key] = FARADAY_C_MOL * area_m2 * c_max[key] / 3600.0
+    ic = params.interconnect
+    r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, ic["r_b_ohm"], ic["r_c_ohm"],
+                                             ic["r_t_ohm"])
+    return ElectrodeBasis(ah_per_m, thickness, fraction, c_max, float(r_eq))
+
+
+def shipped_coordinates(params: PackParams) -> dict[str, float]:
+    """The params' own values in identifiable coordinates (shared coordinates only)."""
+    pv = params.parameter_values()
+    basis = electrode_basis(params)
+    cap = {k: basis.ah_per_m[k] * basis.fraction[k] * basis.thickness_m[k] for k in _ELECTRODES}
+    sto = {k: float(pv[f"Initial concentration in {k} electrode [mol.m-3]"]) / basis.c_max_mol_m3[k]
+           for k in _ELECTRODES}
+    out = {
+        "negative_capacity_ah": cap["negative"],
+        "positive_capacity_ah": cap["positive"],
+        "negative_stoichiometry": sto["negative"],
+        "series_resistance_ohm": basis.r_eq_ohm,
+    }
+    for name, key in _DIFFUSIVITY_KEYS.items():
+        val = pv[key]
+        if isinstance(val, (int, float)):
+            out[name] = float(val)
+    return out
+
+
+def cell_capacity_ah(params: PackParams) -> float:
+    """Nominal cell capacity in Ah (params' nominal cell capacity, else pack capacity / parallel)."""
+    pv = params.parameter_values()
+    try:
+        return float(pv["Nominal cell capacity [A.h]"])
+    except KeyError:
+        return float(params.pack_info.get("nominal_capacity_ah", 1.0)) / params.parallel
+
+
+def _cell_charge_drawn_ah(params: PackParams, recordings: Sequence[Recording]) -> float:
+    """Largest charge (Ah per cell) any recording draws below its starting point."""
+    out = 0.0
+    for rec in recordings:
+        if len(rec.time_s) < 2:
+            continue
+        dt = np.diff(rec.time_s)
+        q = np.concatenate([[0.0], np.cumsum(rec.current_a[:-1] * dt) / 3600.0])
+        out = max(out, float(q.max() - min(q.min(), 0.0)))
+    return out / params.parallel
+
+
+def default_space(params: PackParams, recordings: Sequence[Recording] = (),
+                  extra: Sequence[str] = ()) -> list[Coordinate]:
+    """Search box of the shared coordinates (plus one initial OCV per recording).
+
+    Capacities and the lithium inventory lie within :data:`CAPACITY_FACTORS` of the nominal cell
+    capacity and never below the charge the data draw per cell (a cell cannot deliver more than
+    either electrode holds); the series resistance from ~0 (log scale) to the larger of 10x the
+    params' value and :data:`MAX_RESISTANCE_OHM_PER_CELL` per cell; each recording's initial OCV
+    around its first voltage. Without data the params' own values always lie inside (the box is
+    widened to include them); the charge drawn by the data overrides that for the lower bounds.
+
+    Parameters
+    ----------
+    params : PackParams
+        The starting model.
+    recordings : sequence of Recording
+        The fit data (state coordinates and the charge-drawn bound); may be empty.
+    extra : sequence of str
+        Optional coordinates from :data:`OPTIONAL_COORDINATES` to search as well.
+    """
+    unknown = [e for e in extra if e not in OPTIONAL_COORDINATES]
+    if unknown:
+        raise ParamsError(f"unknown fit coordinate(s) {unknown}; optional ones are {list(OPTIONAL_COORDINATES)}")
+    shipped = shipped_coordinates(params)
+    q_cell = cell_capacity_ah(params)
+    q_drawn = _cell_charge_drawn_ah(params, recordings)
+    cap_lo = CAPACITY_FACTORS[0] * q_cell
+    cap_hi = max(CAPACITY_FACTORS[1] * q_cell, 2.0 * q_drawn)
+    cell_ratio = params.series / params.parallel
+    r_lo = MIN_RESISTANCE_OHM_PER_CELL * cell_ratio
+    r_hi = max(RESISTANCE_FACTOR_HIGH * shipped["series_resistance_ohm"], MAX_RESISTANCE_OHM_PER_CELL * cell_ratio)
+    space = []
+    for name in ("negative_capacity_ah", "positive_capacity_ah"):
+        coord = _widened(name, shipped[name], cap_lo, cap_hi, log=True)
+        low = max(coord.low, q_drawn)
+        space.append(Coordinate(name, max(coord.initial, low), low, coord.high, coord.log))
+    space.append(_widened("negative_stoichiometry", shipped["negative_stoichiometry"],
+                          *NEGATIVE_STOICHIOMETRY_RANGE, log=False))
+    space.append(_widened("series_resistance_ohm", max(shipped["series_resistance_ohm"], r_lo), r_lo, r_hi, log=True))
+    for name in extra:
+        if name not in shipped:
+            raise ParamsError(f"{params.source}: {_DIFFUSIVITY_KEYS[name]} is a function in "
+                              f"{params.base_parameter_set}; it cannot be searched as a scalar")
+        lo, hi = (f * shipped[name] for f in DIFFUSIVITY_FACTORS)
+        space.append(Coordinate(name, shipped[name], lo, hi, True))
+    space.extend(initial_ocv_coordinates(params, recordings))
+    return space
+
+
+def _widened(name: str, initial: float, low: float, high: float, log: bool) -> Coordinate:
+    return Coordinate(name, initial, min(low, initial), max(high, initial), log)
+
+
+def initial_ocv_coordinates(params: PackParams, recordings: Sequence[Recording]) -> list[Coordinate]:
+    """One initial-OCV coordinate per recording, around its first cell voltage.
+
+    A recording that starts above the params' upper cut-off gets a warning: its box follows
+    the data (the discharge simulation does not use the upper cut-off).
+    """
+    upper_v = float(params.parameter_values()["Upper voltage cut-off [V]"])
+    lower_v = params.cell_lower_cutoff_v
+    out = []
+    for k, rec in enumerate(recordings):
+        v_first = float(rec.voltage_v[0]) / params.series
+        if v_first > upper_v + 1e-3:
+            warnings.warn(f"{rec.source}: starts at {v_first:.3f} V per cell, above the params' upper cut-off "
+                          f"{upper_v:.3f} V; its initial state is searched around the measured voltage",
+                          UserWarning, stacklevel=2)
+        lo = max(lower_v, v_first - INITIAL_OCV_MARGIN_V[0])
+        hi = v_first + INITIAL_OCV_MARGIN_V[1]
+        start = v_first + 0.02 if float(rec.current_a[0]) > 0 else v_first
+        out.append(Coordinate(f"initial_ocv_v:{k}", min(max(start, lo), hi), lo, hi, False, recording=k))
+    return out
+
+
+# ----------------------------------------------------------------------------- OCP and state
+@functools.lru_cache(maxsize=32)
+def _ocp_table(base_parameter_set: str, cell_values: tuple, electrode: str, temperature_k: float) -> np.ndarray:
+    import pybamm
+
+    pv = pybamm.ParameterValues(base_parameter_set)
+    pv.update(dict(cell_values), check_already_exists=False)
+    key = f"{_ELECTRODES[electrode]} electrode OCP [V]"
+    fn = pv[key]
+    if not callable(fn):
+        raise ParamsError(f"{key} of {base_parameter_set} is not a function of stoichiometry")
+    n_args = len(inspect.signature(fn).parameters)
+    sto = pybamm.Vector(_STO_GRID)
+    args = {"Stoichiometry": sto} if n_args == 1 else {"Stoichiometry": sto, "Temperature [K]": pybamm.Scalar(
+        temperature_k)}
+    sym = pybamm.FunctionParameter(key, args)
+    return np.asarray(pv.process_symbol(sym).evaluate(), dtype=float).ravel()
+
+
+def ocp_curves(params: PackParams, temperature_k: float = 298.15) -> tuple[np.ndarray, np.ndarray]:
+    """Negative and positive OCP (V) of ``params`` on the stoichiometry grid ``_STO_GRID``."""
+    key = tuple(sorted((k, v) for k, v in params.cell_values.items() if "OCP" in k))
+    return (_ocp_table(params.base_parameter_set, key, "negative", temperature_k),
+            _ocp_table(params.base_parameter_set, key, "positive", temperature_k))
+
+
+def initial_stoichiometries(params: PackParams, q_n_ah: float, q_p_ah: float, q_li_ah: float,
+                            ocv_v: float) -> tuple[float, float]:
+    """Stoichiometries ``(x, y)`` with ``U_p(y) - U_n(x) = ocv_v`` and ``x Q_n + y Q_p = Q_Li``.
+
+    Raises
+    ------
+    SimulationError
+        When no such pair lies inside (0, 1) x (0, 1).
+    """
+    u_n, u_p = ocp_curves(params)
+    x_lo = max(_STO_GRID[0], (q_li_ah - _STO_GRID[-1] * q_p_ah) / q_n_ah)
+    x_hi = min(_STO_GRID[-1], (q_li_ah - _STO_GRID[0] * q_p_ah) / q_n_ah)
+    if not x_lo < x_hi:
+        raise SimulationError(f"lithium inventory {q_li_ah:.3g} Ah does not fit electrodes of {q_n_ah:.3g} and "
+                              f"{q_p_ah:.3g} Ah")
+    x = np.linspace(x_lo, x_hi, 801)
+    y = (q_li_ah - x * q_n_ah) / q_p_ah
+    ocv = np.interp(y, _STO_GRID, u_p) - np.interp(x, _STO_GRID, u_n)
+    order = np.argsort(ocv)
+    if not ocv[order[0]] <= ocv_v <= ocv[order[-1]]:
+        raise SimulationError(f"initial OCV {ocv_v:.3f} V is outside the cell's range "
+                              f"{ocv[order[0]]:.3f}-{ocv[order[-1]]:.3f} V for these capacities")
+    x0 = float(np.interp(ocv_v, ocv[order], x[order]))
+    return x0, (q_li_ah - x0 * q_n_ah) / q_p_ah
+
+
+# ----------------------------------------------------------------------------- the mapping
+def _electrode_values(basis: ElectrodeBasis, electrode: str, capacity_ah: float) -> dict[str, float]:
+    cap = _ELECTRODES[electrode]
+    eps_l_m = capacity_ah / basis.ah_per_m[electrode]
+    fraction = eps_l_m / basis.thickness_m[electrode]
+    thickness = basis.thickness_m[electrode]
+    if fraction > MAX_ACTIVE_FRACTION and fraction > basis.fraction[electrode]:
+        fraction = max(MAX_ACTIVE_FRACTION, basis.fraction[electrode])
+        thickness = eps_l_m / fraction
+    return {f"{cap} electrode active material volume fraction": fraction,
+            f"{cap} electrode thickness [m]": thickness}
+
+
+def pybamm_values(params: PackParams, coordinates: Mapping[str, float], n_recordings: int = 1,
+                  basis: ElectrodeBasis | None = None) -> list[dict[str, float]]:
+    """Map identifiable coordinates to PyBaMM and interconnect values, one dict per recording.
+
+    Shared coordinates missing from ``coordinates`` keep the params' values. Without an
+    ``initial_ocv_v:0`` coordinate the first recording starts at the params' initial OCV; a
+    further recording without its own OCV starts where the first does.
+
+    Parameters
+    ----------
+    params : PackParams
+        The model the coordinates refer to.
+    coordinates : mapping
+        Coordinate name -> value (units in the names).
+    n_recordings : int
+        Number of value dicts to return.
+    basis : ElectrodeBasis, optional
+        :func:`electrode_basis` of ``params`` (computed when omitted).
+
+    Returns
+    -------
+    list of dict
+        For each recording: values for :meth:`PackParams.with_values` (PyBaMM keys and
+        interconnect names).
+
+    Raises
+    ------
+    SimulationError
+        When the coordinates admit no initial state (see :func:`initial_stoichiometries`).
+    """
+    basis = basis or electrode_basis(params)
+    shipped = shipped_coordinates(params)
+    c = {**shipped, **{k: float(v) for k, v in coordinates.items()}}
+    shared: dict[str, float] = {}
+    shared.update(_electrode_values(basis, "negative", c["negative_capacity_ah"]))
+    shared.update(_electrode_values(basis, "positive", c["positive_capacity_ah"]))
+    scale = c["series_resistance_ohm"] / basis.r_eq_ohm if basis.r_eq_ohm > 0 else 1.0
+    for key in ("r_b_ohm", "r_c_ohm", "r_t_ohm"):
+        shared[key] = params.interconnect[key] * scale
+    for name, key in _DIFFUSIVITY_KEYS.items():
+        if name in coordinates:
+            shared[key] = c[name]
+    x_0, y_0 = _first_state(params, basis, c, shipped, "initial_ocv_v:0" in c)
+    q_li_ah = x_0 * c["negative_capacity_ah"] + y_0 * c["positive_capacity_ah"]
+    out = []
+    for k in range(n_recordings):
+        values = dict(shared)
+        ocv_key = f"initial_ocv_v:{k}"
+        x, y = x_0, y_0
+        if k > 0 and ocv_key in c:
+            x, y = initial_stoichiometries(params, c["negative_capacity_ah"], c["positive_capacity_ah"], q_li_ah,
+                                           c[ocv_key])
+        values["Initial concentration in negative electrode [mol.m-3]"] = x * basis.c_max_mol_m3["negative"]
+        values["Initial concentration in positive electrode [mol.m-3]"] = y * basis.c_max_mol_m3["positive"]
+        out.append(values)
+    return out
+
+
+def _positive_stoichiometry_at(params: PackParams, potential_v: float) -> float:
+    """Positive stoichiometry whose OCP is ``potential_v`` (the OCP made monotone decreasing)."""
+    _, u_p = ocp_curves(params)
+    falling = np.minimum.accumulate(u_p)
+    if not falling[-1] <= potential_v <= falling[0]:
+        raise SimulationError(f"positive electrode potential {potential_v:.3f} V is outside its OCP range "
+                              f"{falling[-1]:.3f}-{falling[0]:.3f} V")
+    return float(np.interp(potential_v, falling[::-1], _STO_GRID[::-1]))
+
+
+def _first_state(params: PackParams, basis: ElectrodeBasis, c: Mapping[str, float], shipped: Mapping[str, float],
+                 has_ocv: bool) -> tuple[float, float]:
+    """Stoichiometries ``(x, y)`` at the start of the first recording.
+
+    ``x`` is the coordinate; ``y`` follows from the recording's initial OCV, or without one from
+    the params' own initial OCV (the params' own ``y`` when ``x`` is unchanged).
+    """
+    pv = params.parameter_values()
+    x_s = float(pv["Initial concentration in negative electrode [mol.m-3]"]) / basis.c_max_mol_m3["negative"]
+    y_s = float(pv["Initial concentration in positive electrode [mol.m-3]"]) / basis.c_max_mol_m3["positive"]
+    x = c["negative_stoichiometry"]
+    u_n, u_p = ocp_curves(params)
+    if has_ocv:
+        ocv = c["initial_ocv_v:0"]
+    elif math.isclose(x, x_s, rel_tol=1e-12):
+        return x_s, y_s
+    else:
+        ocv = float(np.interp(y_s, _STO_GRID, u_p) - np.interp(x_s, _STO_GRID, u_n))
+    return x, _positive_stoichiometry_at(params, ocv + float(np.interp(x, _STO_GRID, u_n)))
+
+
+def fitted_parameter_names(values: Mapping[str, float]) -> list[str]:
+    """PyBaMM keys and interconnect names a mapped value dict sets (for ``fit.parameters``)."""
+    return [k for k in values if k in INTERCONNECT_KEYS or "[" in k]
+
+
+__all__ = [
+    "CORE_COORDINATES", "OPTIONAL_COORDINATES", "Coordinate", "ElectrodeBasis", "default_space", "electrode_basis",
+    "initial_stoichiometries", "ocp_curves", "pybamm_values", "shipped_coordinates", "fitted_parameter_names",
+]

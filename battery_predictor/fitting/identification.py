@@ -1,0 +1,445 @@
+"""Identification in identifiable coordinates: seeded TPE, then trust-region least squares.
+
+The search runs on the unit cube of the coordinates of
+:mod:`~battery_predictor.fitting.identifiable` (log scale where the coordinate is). A seeded
+Optuna TPE explores the box; the best distinct TPE candidates then start a trust-region
+reflective least-squares refinement (``scipy.optimize.least_squares``, finite-difference
+Jacobian) on the residual vector whose sum of squares is ``1 - mean R2_mod``. Budgets count
+model evaluations (one evaluation simulates every recording once); every evaluation, also
+those of the Jacobians, counts.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from battery_predictor.errors import BatteryPredictorError, SimulationError
+from battery_predictor.fitting.cost import r2_mod, rmse_v
+from battery_predictor.fitting.identifiable import Coordinate, electrode_basis, pybamm_values
+from battery_predictor.params import PackParams
+from battery_predictor.recording import Recording
+from battery_predictor.simulation.base import PackSimResult, PackSimulator
+
+#: Share of the evaluation budget spent in TPE (the rest refines).
+DEFAULT_TPE_FRACTION = 0.25
+#: Start-up (random) trials: the paper's rule per coordinate, capped at this share of the TPE trials.
+STARTUP_TRIALS_PER_COORDINATE = 20
+MAX_STARTUP_FRACTION = 0.3
+#: Refinements started from the best distinct TPE candidates.
+DEFAULT_STARTS = 3
+#: A refinement may always spend this many Jacobians' worth of evaluations (convergence from a
+#: TPE candidate took 100-185 evaluations on 5 coordinates), even when later starts then get less.
+MIN_REFINE_JACOBIANS = 25
+#: Two TPE candidates are distinct when they differ by this much (max-norm on the unit cube).
+DISTINCT_UNIT_DISTANCE = 0.25
+#: Finite-difference step on the unit cube.
+FD_STEP = 2e-3
+
+
+class BudgetExhausted(BatteryPredictorError):
+    """The evaluation budget is spent (caught inside the optimiser)."""
+
+
+@dataclass
+class EvaluationLog:
+    """Counts evaluations and remembers the best point (unit cube) seen."""
+
+    budget: int
+    count: int = 0
+    best_cost: float = math.inf
+    best_unit: np.ndarray | None = None
+    failed: int = 0
+
+    def charge(self) -> None:
+        """Account one evaluation or raise :class:`BudgetExhausted`."""
+        if self.count >= self.budget:
+            raise BudgetExhausted(f"evaluation budget {self.budget} spent")
+        self.count += 1
+
+    def record(self, unit: np.ndarray, cost: float) -> None:
+        """Keep ``unit`` when its cost is the lowest so far."""
+        if cost < self.best_cost:
+            self.best_cost = cost
+            self.best_unit = np.array(unit, dtype=float)
+
+
+@dataclass(frozen=True)
+class ResidualGrid:
+    """Fixed comparison grid of one recording (measurement grid extended past its end).
+
+    Attributes
+    ----------
+    time_s : numpy.ndarray
+        Relative measurement times, extended with the median interval to ``(1 + extend) x duration``.
+    measured_v : numpy.ndarray
+        Measured voltage, padded with its minimum after the end (Eq. 2 of the seed paper).
+    u_min_v : float
+        Minimum measured voltage.
+    weight : float
+        ``1 / sqrt(n_recordings * sum (U - mean U)^2)`` over the measured samples.
+    """
+
+    time_s: np.ndarray
+    measured_v: np.ndarray
+    u_min_v: float
+    weight: float
+
+    @classmethod
+    def for_recording(cls, rec: Recording, extend_s: float, n_recordings: int) -> ResidualGrid:
+        """The grid of ``rec`` with ``extend_s`` seconds of padding."""
+        t = rec.relative_time_s
+        u = np.asarray(rec.voltage_v, dtype=float)
+        u_min = float(u.min())
+        dt = float(np.median(np.diff(t)))
+        extra = np.arange(t[-1] + dt, t[-1] + extend_s + 0.5 * dt, dt) if extend_s > 0 else np.empty(0)
+        ss_tot = float(np.sum((u - u.mean()) ** 2)) or 1.0
+        return cls(np.concatenate([t, extra]), np.concatenate([u, np.full(extra.size, u_min)]), u_min,
+                   1.0 / math.sqrt(n_recordings * ss_tot))
+
+    def residuals(self, result: PackSimResult | None) -> np.ndarray:
+        """Weighted ``measured - predicted``: a continuous stand-in for R2_mod's comparison.
+
+        The prediction is clipped at ``U_min`` from below (rather than truncated at its first
+        sample below it, Eq. 1, which jumps whenever a load peak dips below ``U_min``) and padded
+        with ``U_min`` after its end; a simulation that stops at its cut-off between two report
+        times is continued linearly to ``U_min`` at its end time.
+        """
+        pred = np.full(self.time_s.size, self.u_min_v)
+        if result is not None and result.time_s.size >= 2:
+            tp, up = result.time_s, result.pack_voltage_v
+            if result.reached_cutoff and result.end_time_s > tp[-1]:
+                tp, up = np.append(tp, result.end_time_s), np.append(up, min(up[-1], self.u_min_v))
+            pred = np.interp(self.time_s, tp, up, right=self.u_min_v)
+            pred[self.time_s > tp[-1]] = self.u_min_v
+            pred = np.maximum(pred, self.u_min_v)
+        return self.weight * (self.measured_v - pred)
+
+
+@dataclass(frozen=True)
+class CandidateScore:
+    """Score of one coordinate vector.
+
+    Attributes
+    ----------
+    r2_mod : float
+        Mean R2_mod over the recordings (seed paper Eq. 1-3).
+    per_recording : list of float
+        R2_mod of each recording.
+    rmse_mv : list of float
+        RMS voltage error (mV) of each recording over the simulated span.
+    results : list of PackSimResult
+        The simulations.
+    values : list of dict
+        The PyBaMM/interconnect values of each recording.
+    """
+
+    r2_mod: float
+    per_recording: list[float]
+    rmse_mv: list[float]
+    results: list[PackSimResult] = field(repr=False)
+    values: list[dict[str, float]] = field(repr=False)
+
+
+@dataclass
+class IdentificationProblem:
+    """Recordings + params + simulator, evaluated at points of a coordinate space.
+
+    Parameters
+    ----------
+    params : PackParams
+        The starting model (its geometry is kept; see :func:`pybamm_values`).
+    recordings : sequence of Recording
+        Fit data, each with its own initial-OCV coordinate in ``space``.
+    simulator : PackSimulator
+        Usually the fast simulator (coordinates move only ``[input]`` parameters).
+    space : list of Coordinate
+        From :func:`~battery_predictor.fitting.identifiable.default_space`.
+    extend_fraction : float
+        Simulations run this fraction of each recording's duration past its end (late ends show).
+    """
+
+    params: PackParams
+    recordings: Sequence[Recording]
+    simulator: PackSimulator
+    space: list[Coordinate]
+    extend_fraction: float = 0.2
+
+    def __post_init__(self) -> None:
+        n = len(self.recordings)
+        self._basis = electrode_basis(self.params)
+        self._grids = [ResidualGrid.for_recording(r, self.extend_fraction * r.duration_s, n) for r in self.recordings]
+
+    @property
+    def names(self) -> list[str]:
+        """Coordinate names in search order."""
+        return [c.name for c in self.space]
+
+    def coordinates(self, unit: Sequence[float]) -> dict[str, float]:
+        """Coordinate values of a point of the unit cube."""
+        return {c.name: c.from_unit(u) for c, u in zip(self.space, unit, strict=True)}
+
+    def unit(self, coordinates: dict[str, float]) -> np.ndarray:
+        """Unit-cube position of coordinate values (missing ones at their initial value)."""
+        return np.array([c.to_unit(min(max(coordinates.get(c.name, c.initial), c.low), c.high)) for c in self.space])
+
+    def values(self, coordinates: dict[str, float]) -> list[dict[str, float]]:
+        """PyBaMM/interconnect values per recording (:func:`pybamm_values`)."""
+        return pybamm_values(self.params, coordinates, len(self.recordings), self._basis)
+
+    def simulate(self, coordinates: dict[str, float]) -> tuple[list[PackSimResult], list[dict[str, float]]]:
+        """Simulate every recording; raise :class:`SimulationError` when any fails."""
+        from battery_predictor.fitting.problem import request_for_recording
+
+        values = self.values(coordinates)
+        results = []
+        for rec, vals in zip(self.recordings, values, strict=True):
+            params = self.params.with_values(vals)
+            req = request_for_recording(params, rec, initial_state="params",
+                                        extend_s=self.extend_fraction * rec.duration_s)
+            res = self.simulator.simulate(params, req)
+            if res.time_s.size < 2:
+                raise SimulationError(f"{rec.source}: simulation ended immediately (cut-off at start)")
+            results.append(res)
+        return results, values
+
+    def residuals(self, coordinates: dict[str, float]) -> np.ndarray:
+        """Concatenated weighted residuals; a failed simulation counts as a prediction at U_min."""
+        try:
+            results, _ = self.simulate(coordinates)
+        except SimulationError:
+            results = [None] * len(self.recordings)
+        return np.concatenate([g.residuals(r) for g, r in zip(self._grids, results, strict=True)])
+
+    def score(self, coordinates: dict[str, float]) -> CandidateScore:
+        """R2_mod and RMSE of ``coordinates`` (raises :class:`SimulationError` on failure)."""
+        results, values = self.simulate(coordinates)
+        r2s, rmses = [], []
+        for rec, res in zip(self.recordings, results, strict=True):
+            t = rec.relative_time_s
+            r2s.append(r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v))
+            rmses.append(1e3 * rmse_v(t, rec.voltage_v, res.time_s, res.pack_voltage_v))
+        return CandidateScore(float(np.mean(r2s)), r2s, rmses, results, values)
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """Outcome of :func:`identify`.
+
+    Attributes
+    ----------
+    coordinates : dict
+        Best coordinate values.
+    unit : numpy.ndarray
+        The same point on the unit cube.
+    cost : float
+        Sum of squared residuals at the best point (about ``1 - mean R2_mod``).
+    evaluations : int
+        Model evaluations spent (TPE + refinement).
+    tpe_evaluations : int
+        Of which in TPE.
+    starts : int
+        Refinements started.
+    seconds : float
+        Wall time in s.
+    history : list of tuple
+        ``(evaluations, best cost)`` after each phase.
+    """
+
+    coordinates: dict[str, float]
+    unit: np.ndarray
+    cost: float
+    evaluations: int
+    tpe_evaluations: int
+    starts: int
+    seconds: float
+    history: list[tuple[str, int, float]]
+
+
+def startup_trials(n_tpe: int, n_coordinates: int, per_coordinate: int = STARTUP_TRIALS_PER_COORDINATE,
+                   max_fraction: float = MAX_STARTUP_FRACTION) -> int:
+    """Random start-up trials of TPE: ``per_coordinate`` each, at most ``max_fraction`` of the TPE trials."""
+    return max(1, min(per_coordinate * n_coordinates, int(max_fraction * n_tpe)))
+
+
+def _cost_function(problem: IdentificationProblem, log: EvaluationLog) -> Callable[[np.ndarray], np.ndarray]:
+    cache: dict[bytes, np.ndarray] = {}
+
+    def residual(unit: np.ndarray) -> np.ndarray:
+        unit = np.clip(np.asarray(unit, dtype=float), 0.0, 1.0)
+        key = unit.tobytes()
+        if key not in cache:
+            log.charge()
+            r = problem.residuals(problem.coordinates(unit))
+            cache[key] = r
+            log.record(unit, float(r @ r))
+        return cache[key]
+
+    return residual
+
+
+def _run_tpe(problem: IdentificationProblem, residual, n_trials: int, seed: int, start_unit: np.ndarray,
+             startup_per_coordinate: int) -> list[tuple[float, np.ndarray]]:
+    """TPE on the unit cube; returns ``(cost, unit)`` of every completed trial."""
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.ERROR)
+    n_startup = startup_trials(n_trials, len(problem.space), startup_per_coordinate)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        sampler = optuna.samplers.TPESampler(seed=seed, n_startup_trials=n_startup, multivariate=True)
+    study = optuna.create_study(direction="minimize", sampler=sampler)
+    study.enqueue_trial({f"u{i}": float(u) for i, u in enumerate(start_unit)})
+    done: list[tuple[float, np.ndarray]] = []
+
+    def objective(trial) -> float:
+        unit = np.array([trial.suggest_float(f"u{i}", 0.0, 1.0) for i in range(len(problem.space))])
+        r = residual(unit)
+        done.append((float(r @ r), unit))
+        return float(r @ r)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        try:
+            study.optimize(objective, n_trials=n_trials)
+        except BudgetExhausted:
+            pass
+    return done
+
+
+def distinct_best(candidates: list[tuple[float, np.ndarray]], count: int,
+                  distance: float = DISTINCT_UNIT_DISTANCE) -> list[np.ndarray]:
+    """The ``count`` lowest-cost points that are pairwise at least ``distance`` apart (max-norm)."""
+    picked: list[np.ndarray] = []
+    for _cost, unit in sorted(candidates, key=lambda c: c[0]):
+        if all(np.max(np.abs(unit - p)) >= distance for p in picked):
+            picked.append(unit)
+        if len(picked) >= count:
+            break
+    return picked
+
+
+def _fd_jacobian(residual, unit: np.ndarray, step: float = FD_STEP) -> np.ndarray:
+    """Forward differences on the unit cube (backward at the upper bound)."""
+    f0 = residual(unit)
+    jac = np.empty((f0.size, unit.size))
+    for i in range(unit.size):
+        h = step if unit[i] + step <= 1.0 else -step
+        shifted = unit.copy()
+        shifted[i] += h
+        jac[:, i] = (residual(shifted) - f0) / h
+    return jac
+
+
+def _refine(residual, start: np.ndarray, max_evaluations: int) -> float:
+    """Trust-region reflective least squares from ``start``; returns the lowest cost it reached.
+
+    The evaluation log keeps the best point across all refinements.
+    """
+    from scipy.optimize import least_squares
+
+    seen: list[float] = []
+
+    def tracked(unit: np.ndarray) -> np.ndarray:
+        r = residual(unit)
+        seen.append(float(r @ r))
+        return r
+
+    try:
+        least_squares(tracked, start, jac=lambda u: _fd_jacobian(residual, u), bounds=(0.0, 1.0), method="trf",
+                      x_scale=1.0, max_nfev=max(2, max_evaluations), xtol=1e-6, ftol=1e-8, gtol=1e-8)
+    except BudgetExhausted:
+        pass
+    return min(seen, default=math.inf)
+
+
+def identify(problem: IdentificationProblem, *, evaluations: int = 400, seed: int = 0,
+             tpe_fraction: float = DEFAULT_TPE_FRACTION, starts: int = DEFAULT_STARTS,
+             startup_per_coordinate: int = STARTUP_TRIALS_PER_COORDINATE,
+             progress: Callable[[str, int, float], None] | None = None) -> IdentificationResult:
+    """Seeded TPE then multi-start trust-region least squares, within ``evaluations`` model runs.
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+        What to fit.
+    evaluations : int
+        Budget in model evaluations (each simulates every recording once).
+    seed : int
+        TPE sampler seed (the refinement is deterministic).
+    tpe_fraction : float
+        Share of the budget for TPE (0 = refinement from the start point only).
+    starts : int
+        Refinements from the best distinct TPE candidates (the start point counts as a candidate).
+    startup_per_coordinate : int
+        Random TPE start-up trials per coordinate (capped at 30 % of the TPE trials).
+    progress : callable, optional
+        Called as ``progress(phase, evaluations, best_cost)`` after each phase.
+    """
+    if evaluations < 2:
+        raise BatteryPredictorError(f"--evaluations must be >= 2, got {evaluations}")
+    if not 0.0 <= tpe_fraction < 1.0:
+        raise BatteryPredictorError(f"TPE fraction must be within [0, 1), got {tpe_fraction}")
+    tic = time.perf_counter()
+    log = EvaluationLog(budget=evaluations)
+    residual = _cost_function(problem, log)
+    start = problem.unit({c.name: c.initial for c in problem.space})
+    history: list[tuple[str, int, float]] = []
+
+    def note(phase: str) -> None:
+        history.append((phase, log.count, log.best_cost))
+        if progress is not None:
+            progress(phase, log.count, log.best_cost)
+
+    n_tpe = int(round(tpe_fraction * evaluations))
+    candidates: list[tuple[float, np.ndarray]] = []
+    if n_tpe > 0:
+        candidates = _run_tpe(problem, residual, n_tpe, seed, start, startup_per_coordinate)
+    else:
+        r = residual(start)
+        candidates = [(float(r @ r), start)]
+    tpe_count = log.count
+    note("tpe")
+    picked = distinct_best(candidates, max(1, starts))
+    for k, unit in enumerate(picked):
+        remaining = evaluations - log.count
+        if remaining <= 0:
+            break
+        log.budget = log.count + min(remaining, max(remaining // (len(picked) - k),
+                                                     MIN_REFINE_JACOBIANS * (len(problem.space) + 1)))
+        reached = _refine(residual, unit, max_evaluations=log.budget - log.count)
+        log.budget = evaluations
+        note(f"refine {k + 1} (reached {reached:.4g})")
+    best = log.best_unit if log.best_unit is not None else start
+    return IdentificationResult(coordinates=problem.coordinates(best), unit=best, cost=log.best_cost,
+                                evaluations=log.count, tpe_evaluations=tpe_count, starts=len(picked),
+                                seconds=time.perf_counter() - tic, history=history)
+
+
+def jacobian_at(problem: IdentificationProblem, unit: np.ndarray, step: float = FD_STEP) -> tuple[np.ndarray,
+                                                                                                np.ndarray]:
+    """Residuals and their Jacobian on the unit cube at ``unit`` (``n + 1`` evaluations)."""
+    log = EvaluationLog(budget=unit.size + 2)
+    residual = _cost_function(problem, log)
+    return residual(unit), _fd_jacobian(residual, np.asarray(unit, dtype=float), step)
+
+
+__all__ = ["IdentificationProblem", "IdentificationResult", "identify", "identifiability_of", "jacobian_at",
+           "startup_trials",
+           "distinct_best", "ResidualGrid", "CandidateScore"]
+
+
+def identifiability_of(problem: IdentificationProblem, unit: np.ndarray):
+    """:class:`~battery_predictor.fitting.identifiability.IdentifiabilityReport` at ``unit`` (n + 1 evaluations)."""
+    from battery_predictor.fitting.identifiability import analyse, theta_jacobian
+
+    residuals, jac_unit = jacobian_at(problem, unit)
+    spans = [math.log(c.high / c.low) if c.log else c.high - c.low for c in problem.space]
+    coords = problem.coordinates(unit)
+    return analyse(problem.names, [coords[n] for n in problem.names], [c.log for c in problem.space], residuals,
+                   theta_jacobian(jac_unit, spans), [(c.low, c.high) for c in problem.space])

@@ -1,0 +1,75 @@
+"""Window averages of a recording, as the battery monitor makes them (``--resample SECONDS``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from battery_predictor.errors import InputDataError
+from battery_predictor.recording import Recording
+
+
+def _hold_durations_s(time_s: np.ndarray) -> np.ndarray:
+    """How long each sample holds (s): until the next sample; the last one for the median interval."""
+    dt = np.diff(time_s)
+    return np.append(dt, np.median(dt) if dt.size else 1.0)
+
+
+def resample_windows(rec: Recording, window_s: float) -> Recording:
+    """Average a recording over consecutive windows of ``window_s`` seconds.
+
+    The first sample is kept unchanged (it carries the state before the load); the windows
+    ``(t0 + k w, t0 + (k + 1) w]`` follow it. Current and temperature are
+    averaged weighted by each sample's hold time (so the charge drawn is kept, with the current of
+    a sample held until the next one, as :meth:`StepLoad.from_samples` reads it); voltage is the
+    plain mean of the window's samples. Each window is stamped at its first sample's time, so a
+    window's mean current holds until the next window. Windows without samples are dropped.
+
+    Parameters
+    ----------
+    rec : Recording
+        Samples at any (irregular) spacing.
+    window_s : float
+        Window length in s (> 0). Windows shorter than the sampling leave the data unchanged.
+
+    Returns
+    -------
+    Recording
+        One sample per non-empty window, same source and metadata.
+
+    Raises
+    ------
+    InputDataError
+        When ``window_s`` is not a positive finite number.
+    """
+    if not (np.isfinite(window_s) and window_s > 0):
+        raise InputDataError(f"{rec.source}: --resample must be a positive number of seconds, got {window_s}")
+    t = np.asarray(rec.time_s, dtype=float)
+    if t.size < 2:
+        return rec
+    hold_s = _hold_durations_s(t)
+    index = np.ceil((t - t[0]) / window_s).astype(np.int64)
+    starts = np.flatnonzero(np.diff(index, prepend=-1))
+    counts = np.diff(np.append(starts, t.size))
+    weight_s = np.add.reduceat(hold_s, starts)
+
+    def weighted_mean(values: np.ndarray) -> np.ndarray:
+        return np.add.reduceat(values * hold_s, starts) / weight_s
+
+    temperature_k = None
+    if rec.temperature_k is not None:
+        temperature_k = weighted_mean(np.asarray(rec.temperature_k, dtype=float))
+    return Recording(
+        time_s=t[starts],
+        voltage_v=np.add.reduceat(np.asarray(rec.voltage_v, dtype=float), starts) / counts,
+        current_a=weighted_mean(np.asarray(rec.current_a, dtype=float)),
+        temperature_k=temperature_k,
+        source=rec.source,
+        metadata={**rec.metadata, "resample_window_s": float(window_s)},
+    )
+
+
+def resample_all(recordings, window_s: float | None) -> list[Recording]:
+    """:func:`resample_windows` on every recording; ``None`` or 0 keeps them unchanged."""
+    if not window_s:
+        return list(recordings)
+    return [resample_windows(r, window_s) for r in recordings]

@@ -1,0 +1,196 @@
+"""Identifiable coordinates, their mapping, the identification optimiser and the identifiability report."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from battery_predictor.errors import SimulationError
+from battery_predictor.fitting.identifiability import analyse
+from battery_predictor.fitting.identifiable import (
+    default_space,
+    initial_stoichiometries,
+    ocp_curves,
+    pybamm_values,
+    shipped_coordinates,
+)
+from battery_predictor.fitting.identification import (
+    IdentificationProblem,
+    distinct_best,
+    identifiability_of,
+    identify,
+    startup_trials,
+)
+from battery_predictor.fitting.resample import resample_windows
+from battery_predictor.params import load_params
+from battery_predictor.recording import Recording
+from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
+
+REPO = Path(__file__).resolve().parents[2]
+#: The pack models in params/ (the other YAML files there hold load profiles and station data).
+SHIPPED = [REPO / "params" / f"{name}.yaml" for name in ("temi", "ranger_mini", "lgm50", "panasonic_18650pf")]
+
+
+@pytest.fixture(scope="module")
+def panasonic():
+    return load_params(REPO / "params" / "panasonic_18650pf.yaml")
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_shipped_params_lie_inside_their_own_default_search_space(path):
+    params = load_params(path)
+    shipped = shipped_coordinates(params)
+    for coord in default_space(params):
+        assert coord.low < coord.high
+        assert coord.contains(shipped[coord.name]), (coord.name, shipped[coord.name], coord.low, coord.high)
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_shipped_coordinates_map_back_to_the_shipped_values(path):
+    params = load_params(path)
+    pv = params.parameter_values()
+    values = pybamm_values(params, shipped_coordinates(params))[0]
+    for key, val in values.items():
+        expected = params.interconnect[key] if key.endswith("_ohm") else float(pv[key])
+        assert val == pytest.approx(expected, rel=1e-9), key
+
+
+def test_resistance_is_searched_from_near_zero_on_a_log_scale(temi_params):
+    coord = {c.name: c for c in default_space(temi_params)}["series_resistance_ohm"]
+    assert coord.log
+    assert coord.low <= 1e-4 * shipped_coordinates(temi_params)["series_resistance_ohm"]
+
+
+def test_capacity_bounds_never_fall_below_the_charge_the_data_draw(panasonic):
+    t = np.arange(0.0, 3600.0, 10.0)
+    rec = Recording(t, 4.0 - 1e-4 * t, np.full(t.size, 5.0))  # 5 Ah drawn from a 2.9 Ah cell
+    space = {c.name: c for c in default_space(panasonic, [rec])}
+    for name in ("negative_capacity_ah", "positive_capacity_ah"):
+        assert space[name].low == pytest.approx(5.0, rel=1e-2)
+
+
+def test_initial_stoichiometries_reproduce_the_ocv_and_the_lithium_inventory(panasonic):
+    u_n, u_p = ocp_curves(panasonic)
+    grid = np.linspace(1e-4, 1 - 1e-4, u_n.size)
+    x, y = initial_stoichiometries(panasonic, 3.4, 5.0, 4.4, 3.9)
+    assert x * 3.4 + y * 5.0 == pytest.approx(4.4)
+    assert np.interp(y, grid, u_p) - np.interp(x, grid, u_n) == pytest.approx(3.9, abs=2e-3)
+
+
+def test_an_ocv_the_electrodes_cannot_reach_is_a_simulation_error(panasonic):
+    with pytest.raises(SimulationError, match="outside the cell's range"):
+        initial_stoichiometries(panasonic, 3.4, 5.0, 4.4, 6.0)
+
+
+def test_data_starting_above_the_upper_cutoff_warn_and_get_a_box_around_their_voltage(panasonic):
+    t = np.arange(0.0, 600.0, 10.0)
+    rec = Recording(t, np.full(t.size, 4.30), np.full(t.size, 1.0), source="high.csv")
+    with pytest.warns(UserWarning, match="high.csv.*above the params' upper cut-off"):
+        space = default_space(panasonic, [rec])
+    state = space[-1]
+    assert state.name == "initial_ocv_v:0" and state.contains(4.30)
+
+
+def test_resampling_keeps_the_first_sample_and_the_charge_drawn():
+    rng = np.random.default_rng(0)
+    t = np.cumsum(rng.uniform(0.5, 1.5, 2000))
+    i = rng.uniform(-1.0, 5.0, t.size)
+    rec = Recording(t, 4.0 - 1e-5 * (t - t[0]), i, temperature_k=np.full(t.size, 300.0))
+    out = resample_windows(rec, 10.0)
+    assert out.time_s[0] == t[0] and out.current_a[0] == i[0] and out.voltage_v[0] == rec.voltage_v[0]
+    assert np.all(np.diff(out.time_s) > 0) and out.time_s.size < t.size / 5
+    before_last_window = t < out.time_s[-1]
+    charge_in = np.sum((i[:-1] * np.diff(t))[before_last_window[:-1]])
+    charge_out = np.sum(out.current_a[:-1] * np.diff(out.time_s))
+    assert charge_out == pytest.approx(charge_in, rel=1e-12)
+    assert np.allclose(out.temperature_k, 300.0)
+
+
+def test_startup_trials_follow_the_per_coordinate_rule_but_never_exceed_a_share_of_the_budget():
+    assert startup_trials(n_tpe=10_000, n_coordinates=6) == 120
+    assert startup_trials(n_tpe=100, n_coordinates=6) == 30
+
+
+def test_distinct_best_skips_near_duplicates_of_better_candidates():
+    cands = [(0.1, np.array([0.5, 0.5])), (0.2, np.array([0.52, 0.5])), (0.3, np.array([0.9, 0.1]))]
+    picked = distinct_best(cands, 2)
+    assert len(picked) == 2 and np.allclose(picked[1], [0.9, 0.1])
+
+
+def test_identifiability_flags_compensating_parameters_and_keeps_independent_ones():
+    rng = np.random.default_rng(1)
+    m = 200
+    a = rng.normal(size=m)
+    b = rng.normal(size=m)
+    # residual depends on theta_0 + theta_1 only (compensating) and on theta_2 alone
+    jac = np.column_stack([a, a, b])
+    residuals = 1e-3 * rng.normal(size=m)
+    rep = analyse(["p", "q", "s"], [1.0, 2.0, 3.0], [True, True, False], residuals, jac,
+                  [(0.1, 10.0), (0.1, 10.0), (0.0, 10.0)])
+    assert rep.determined == [False, False, True]
+    assert any(e["undetermined"] for e in rep.eigen_directions)
+    weakest = rep.eigen_directions[0]["components"]
+    assert abs(weakest["p"]) == pytest.approx(abs(weakest["q"]), rel=1e-6) and abs(weakest["s"]) < 1e-6
+
+
+def _synthetic_recording(params, coordinates, seed: int) -> Recording:
+    """A 1 h pulsed discharge of ``params`` at ``coordinates`` with 2 mV noise, 20 s samples."""
+    rng = np.random.default_rng(seed)
+    durations = rng.uniform(60.0, 240.0, 30)
+    currents = rng.uniform(0.5, 6.0, 30)
+    load = StepLoad.from_durations(durations, currents)
+    values = pybamm_values(params, coordinates)[0]
+    truth = params.with_values(values)
+    t_out = np.arange(0.0, load.end_s, 20.0)
+    res = get_simulator("fast").simulate(truth, SimulationRequest(load=load, output_time_s=t_out))
+    v = res.pack_voltage_v + rng.normal(0.0, 0.002, res.time_s.size)
+    return Recording(res.time_s, v, load.current_at(res.time_s), source=f"synthetic-{seed}")
+
+
+def _far_truth(params) -> dict[str, float]:
+    shipped = shipped_coordinates(params)
+    return {"negative_capacity_ah": 1.3 * shipped["negative_capacity_ah"],
+            "positive_capacity_ah": 0.75 * shipped["positive_capacity_ah"],
+            "negative_stoichiometry": 0.8,
+            "series_resistance_ohm": 4.0 * shipped["series_resistance_ohm"],
+            "initial_ocv_v:0": 4.05}
+
+
+def _problem(params, rec, initial: dict[str, float] | None = None) -> IdentificationProblem:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        space = default_space(params, [rec])
+    if initial:
+        space = [dataclasses.replace(c, initial=initial[c.name]) for c in space]
+    return IdentificationProblem(params, [rec], get_simulator("fast"), space)
+
+
+def test_identify_spends_at_most_its_budget_and_improves_on_a_far_start(panasonic):
+    rec = _synthetic_recording(panasonic, _far_truth(panasonic), seed=3)
+    problem = _problem(panasonic, rec)
+    start = problem.residuals({c.name: c.initial for c in problem.space})
+    result = identify(problem, evaluations=40, seed=0, tpe_fraction=0.25, starts=2)
+    assert result.evaluations <= 40
+    assert result.cost < 0.5 * float(start @ start)
+    assert [h[0] for h in result.history][0] == "tpe"
+
+
+def test_refinement_near_the_truth_converges_to_it_and_reports_the_positive_electrode_determined(panasonic):
+    truth = _far_truth(panasonic)
+    rec = _synthetic_recording(panasonic, truth, seed=3)
+    near = {k: v * (1.1 if k != "initial_ocv_v:0" else 1.0) for k, v in truth.items()}
+    problem = _problem(panasonic, rec, initial=near)
+    at_truth = problem.residuals(truth)
+    result = identify(problem, evaluations=120, seed=0, tpe_fraction=0.0, starts=1)
+    assert result.cost <= 1.05 * float(at_truth @ at_truth)  # the noise floor of the true parameters
+    for name in ("positive_capacity_ah", "series_resistance_ohm"):
+        assert result.coordinates[name] == pytest.approx(truth[name], rel=0.05), name
+    # the data sample the current every 20 s, so even the true parameters miss the load's edges
+    assert problem.score(result.coordinates).rmse_mv[0] <= 1.05 * problem.score(truth).rmse_mv[0]
+    rep = identifiability_of(problem, result.unit)
+    determined = dict(zip(rep.names, rep.determined, strict=True))
+    assert determined["positive_capacity_ah"] and determined["series_resistance_ohm"]
