@@ -30,7 +30,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from battery_predictor.diagnosis.extensions_impl import R_GAS
 from battery_predictor.errors import InputDataError, SimulationError
 from battery_predictor.params import INTERCONNECT_KEYS, PackParams
 from battery_predictor.recording import Recording
@@ -40,6 +39,7 @@ from battery_predictor.simulation.cell_setup import (
     prepared_parameter_values,
     quiet_pybamm,
 )
+from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
 from battery_predictor.simulation.fast import THICKNESS_TO_FRACTION
 from battery_predictor.simulation.load import StepLoad
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
@@ -464,17 +464,15 @@ class Engine:
         temp = None
         if want_temperature or post.series_activation_j_mol:
             temp = np.asarray(sols[0]["Volume-averaged cell temperature [K]"](t_eval), dtype=float)
+        r_eq_t = r_eq
         if post.series_activation_j_mol:
-            excess = r_eq * (np.exp(post.series_activation_j_mol / R_GAS * (1.0 / temp - 1.0 / 298.15)) - 1.0)
-            v_cells = [v - i_pack * excess / params.series for v in v_cells]
+            r_eq_t = r_eq * series_resistance_factor(temp, post.series_activation_j_mol)
         reached = any(s.termination and "Minimum voltage" in str(s.termination) for s in sols)
-        if len(v_cells) == 1:
-            v_pack = params.series * v_cells[0]
-            v_min = v_cells[0]
-        else:
-            v_pack = (params.series - 1) * v_cells[0] + v_cells[1]
-            v_min = np.minimum(v_cells[0], v_cells[1])
-        v_pack = v_pack - i_pack * r_eq
+        v_pack = pack_voltage_v(v_cells[0], i_pack, series=params.series, r_eq_ohm=r_eq_t,
+                                weak_cell_voltage_v=v_cells[1] if len(v_cells) > 1 else None)
+        # the cut-off sees each cell's share of the series resistance's temperature excess
+        excess_per_cell_v = i_pack * (r_eq_t - r_eq) / params.series
+        v_min = np.minimum.reduce([v - excess_per_cell_v for v in v_cells])
         below = np.nonzero(v_min < cutoff_v)[0]
         if below.size:  # the corrected voltage (contact drop / weak cell) reaches the cut-off first
             n = max(int(below[0]), 1)

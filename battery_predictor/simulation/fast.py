@@ -1,7 +1,8 @@
 """Fast pack simulator for packs of identical cells.
 
 One PyBaMM cell carries ``I_pack / parallel``; the pack voltage is
-``series * V_cell - I_pack * R_eq`` where ``R_eq`` is the interconnect resistance
+``series * V_cell - I_pack * R_eq`` (:func:`~battery_predictor.simulation.engine.pack.pack_voltage_v`)
+where ``R_eq`` is the interconnect resistance
 of liionpack's netlist reduced for identical cells
 (:func:`~battery_predictor.simulation.network.equivalent_network_resistance_ohm`).
 The simulation ends when the cell reaches its lower cut-off (the cell-level
@@ -31,6 +32,7 @@ from battery_predictor.simulation.cell_setup import (
     prepared_parameter_values,
     quiet_pybamm,
 )
+from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 #: Width (s) of the ramp that stands for each current step in the interpolant.
@@ -130,9 +132,11 @@ class FastPackSimulator:
         v_n, v_w = main.min_cell_voltage_v[:n], weak.min_cell_voltage_v[:n]
         i_pack = main.pack_current_a[:n]
         first = main if main.end_time_s <= weak.end_time_s else weak
+        r_eq = main.extra["r_eq_ohm"]
         return PackSimResult(
             time_s=main.time_s[:n],
-            pack_voltage_v=(params.series - 1) * v_n + v_w - i_pack * main.extra["r_eq_ohm"],
+            pack_voltage_v=pack_voltage_v(v_n, i_pack, series=params.series, r_eq_ohm=r_eq if np.ndim(r_eq) == 0
+                                          else r_eq[:n], weak_cell_voltage_v=v_w),
             pack_current_a=i_pack,
             min_cell_voltage_v=np.minimum(v_n, v_w),
             termination=first.termination,
@@ -193,11 +197,12 @@ class FastPackSimulator:
         r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
                                                  p["r_t_ohm"])
         if "temperature" in params.extensions:  # extension temperature: Arrhenius series resistance
-            from battery_predictor.diagnosis.extensions_impl import series_resistance_factor
+            from battery_predictor.diagnosis.extensions_impl import EA_SERIES, extension_value
 
             r_eq = r_eq * series_resistance_factor(
-                params, np.asarray(sol["Volume-averaged cell temperature [K]"](t_eval), dtype=float))
-        v_pack = params.series * v_cell - i_pack * r_eq
+                np.asarray(sol["Volume-averaged cell temperature [K]"](t_eval), dtype=float),
+                extension_value(params, EA_SERIES))
+        v_pack = pack_voltage_v(v_cell, i_pack, series=params.series, r_eq_ohm=r_eq)
         if not np.all(np.isfinite(v_pack)):
             raise SimulationError("fast simulation produced non-finite voltages")
         extra = {"r_eq_ohm": r_eq, "solution": sol}
