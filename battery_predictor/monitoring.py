@@ -148,6 +148,8 @@ class PackSnapshot:
         Samples (messages) accepted into / rejected from this window.
     stale : bool
         True when no fresh input arrived within ``stale_after_s`` (values are the last known ones).
+    peak_current_a : float
+        Largest sample current of the window in A (positive = discharge); NaN for a stale snapshot.
     """
 
     stamp_s: float
@@ -158,6 +160,7 @@ class PackSnapshot:
     samples_used: int
     samples_rejected: int
     stale: bool
+    peak_current_a: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -228,6 +231,7 @@ class _Window:
     counts: dict[str, int] = field(default_factory=lambda: {"voltage": 0, "current": 0, "temperature": 0})
     used: int = 0
     rejected: int = 0
+    peak_current: float = -math.inf
 
 
 class BatteryMonitor:
@@ -353,6 +357,8 @@ class BatteryMonitor:
         for key, value in values.items():
             w.sums[key] += value
             w.counts[key] += 1
+        if "current" in values:
+            w.peak_current = max(w.peak_current, values["current"])
         w.used += 1
         self._last_stamp[name] = stamp_s
         self.accepted[name] = self.accepted.get(name, 0) + 1
@@ -382,7 +388,7 @@ class BatteryMonitor:
             t_k = self._last_values[2] if self._last_values is not None else math.nan
         self._last_values = (v, i, t_k)
         snap = PackSnapshot((w.index + 1) * self.config.window_s, v, i, t_k, self.config.window_s, w.used,
-                            w.rejected, False)
+                            w.rejected, False, w.peak_current)
         self._last_snapshot = snap
         self._last_stale_emit = None
         self.snapshots_emitted += 1

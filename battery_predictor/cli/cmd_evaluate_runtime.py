@@ -32,6 +32,9 @@ def register(sub) -> None:
                    help="recordings (e.g. the fit data) whose mean charge to the cut-off is a counter's capacity")
     p.add_argument("--end-margin-v", type=float, default=None, metavar="V",
                    help="a discharge that stops this close to the cut-off ended on it (default 0.5 V per cell)")
+    p.add_argument("--peak-source", choices=("window", "sample"), default=None,
+                   help="which load peaks stop the pack: 5 s window means or single samples "
+                        "(default: the predictor's default, see the node parameter peak_source)")
     p.add_argument("--out", default=None, metavar="DIR", help="write summary.json, checkpoints.json and plots here")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_input_check_arguments(p)
@@ -89,15 +92,17 @@ def run(args) -> int:
         if not known:
             raise InputDataError("--capacity-from: none of these recordings ends at the cut-off")
         capacities["measured"] = sum(known) / len(known)
+    config = PredictorConfig(params_file=str(params.source), cutoff_voltage_v=cutoff_v,
+                             **({"peak_source": args.peak_source} if args.peak_source else {}))
     results = []
     for path in args.data:
         res = ev.evaluate_recording(params, load(path), cutoff_v=cutoff_v, capacities_ah=capacities,
-                                    checkpoints=checkpoints, end_margin_v=args.end_margin_v)
+                                    checkpoints=checkpoints, end_margin_v=args.end_margin_v, config=config)
         results.append(res)
         if not args.json:
             _print_recording(res, list(capacities))
     summary = ev.summarise(results, list(capacities))
-    summary.update({"params": str(params.source), "cutoff_v": cutoff_v, "capacities_ah": capacities,
+    summary.update({"params": str(params.source), "cutoff_v": cutoff_v, "peak_source": config.peak_source, "capacities_ah": capacities,
                     "checkpoints": list(checkpoints), "seconds": time.perf_counter() - tic})
     if out_dir is not None:
         _write_outputs(out_dir, summary, results)

@@ -43,12 +43,14 @@ DEFAULT_CHECKPOINTS = tuple(round(0.1 * k, 1) for k in range(1, 10))
 
 @dataclass(frozen=True)
 class Windows:
-    """Monitor windows of one recording (arrays of equal length; s, V, A positive = discharge, K)."""
+    """Monitor windows of one recording (arrays of equal length; s, V, mean and largest sample A positive =
+    discharge, K)."""
 
     time_s: np.ndarray
     voltage_v: np.ndarray
     current_a: np.ndarray
     temperature_k: np.ndarray
+    peak_current_a: np.ndarray
 
     @classmethod
     def of(cls, rec: Recording, window_s: float = 5.0) -> Windows:
@@ -58,8 +60,9 @@ class Windows:
         snaps = monitor_windows(rec.time_s, rec.voltage_v, rec.current_a, rec.temperature_k, cfg)
         if len(snaps) < 3:
             raise InputDataError(f"{rec.source}: fewer than 3 monitor windows of {window_s:g} s")
-        cols = np.array([(s.stamp_s, s.voltage_v, s.current_a, s.temperature_k) for s in snaps], dtype=float)
-        return cls(cols[:, 0], cols[:, 1], cols[:, 2], cols[:, 3])
+        cols = np.array([(s.stamp_s, s.voltage_v, s.current_a, s.temperature_k, s.peak_current_a) for s in snaps],
+                        dtype=float)
+        return cls(cols[:, 0], cols[:, 1], cols[:, 2], cols[:, 3], cols[:, 4])
 
     def charge_ah(self, start_s: float, end_s: float) -> float:
         """Net charge drawn between two window stamps, Ah (each window's mean holds over its window)."""
@@ -174,7 +177,8 @@ def evaluate_recording(params: PackParams, rec: Recording, *, cutoff_v: float, c
     results, k = [], 0
     for fraction, t_cp in zip(checkpoints, times):
         while k < win.time_s.size and win.time_s[k] <= t_cp:
-            core.update_state(win.time_s[k], win.voltage_v[k], win.current_a[k], win.temperature_k[k])
+            core.update_state(win.time_s[k], win.voltage_v[k], win.current_a[k], win.temperature_k[k],
+                              win.peak_current_a[k])
             k += 1
         stamp = float(win.time_s[k - 1])
         answer = core.remaining_runtime(stamp)

@@ -49,6 +49,7 @@ def ns_to_stamp(time_ns: int) -> Time:
 def pack_state_msg(snap: PackSnapshot, frame_id: str) -> PackState:
     """A monitor snapshot as ``PackState``."""
     msg = PackState(voltage_v=float(snap.voltage_v), current_a=float(snap.current_a),
+                    peak_current_a=float(snap.peak_current_a),
                     temperature_k=float(snap.temperature_k), window_s=float(snap.window_s),
                     samples_used=int(min(snap.samples_used, 2**32 - 1)),
                     samples_rejected=int(min(snap.samples_rejected, 2**32 - 1)), stale=bool(snap.stale))

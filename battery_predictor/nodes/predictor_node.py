@@ -51,6 +51,7 @@ from battery_predictor.nodes._params import (
 from battery_predictor.nodes._sync import TimerProbe
 from battery_predictor.nodes.messages import fill_route_response, remaining_runtime_msg, route_sections, stamp_to_s
 from battery_predictor.prediction.core import (
+    PEAK_SOURCES,
     STATUS_MODEL_FAILED,
     STATUS_STALE_INPUT,
     PredictorConfig,
@@ -216,6 +217,13 @@ class PredictorNode(Node):
                 "Quantile of the present cycle's 5 s currents taken as its recurring load peak: the runtime ends "
                 "when such a peak pulls the pack to the cut-off (0 = under the average load, as the paper).",
                 0.0, 1.0),
+            peak_source=declare_str(
+                self, "peak_source", PredictorConfig.peak_source,
+                "Which peaks stop the robot: 'window' (5 s window means below the cut-off, as the paper's robots) "
+                "or 'sample' (a single sample below it, e.g. test equipment or a BMS cut-off).", PEAK_SOURCES),
+            peak_duration_s=declare_float(self, "peak_duration_s", _core_default("peak_duration_s"),
+                                          "How long a sample peak lasts in the model, s (peak_source 'sample').",
+                                          0.01, 60.0),
             route_currents_file=resolve_params_file(declare_str(
                 self, "route_currents_file", "",
                 "Per-(payload, slope) current samples of the luggage robot; empty = the bundled "
@@ -259,7 +267,8 @@ class PredictorNode(Node):
             with self._lock:
                 self._monitor_stale = False
             for core in {id(self.core): self.core, id(self.route_core): self.route_core}.values():
-                core.update_state(stamp, float(msg.voltage_v), float(msg.current_a), float(msg.temperature_k))
+                core.update_state(stamp, float(msg.voltage_v), float(msg.current_a), float(msg.temperature_k),
+                                  float(msg.peak_current_a))
         with self._lock:
             self.states_received += 1
 

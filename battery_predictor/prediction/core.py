@@ -37,6 +37,9 @@ STATUS_CHARGING = 6
 STATUS_NO_LOAD = 7
 STATUS_BEYOND_HORIZON = 8
 
+#: Values of ``PredictorConfig.peak_source``.
+PEAK_SOURCES = ("window", "sample")
+
 
 @dataclass(frozen=True)
 class PredictorConfig:
@@ -84,6 +87,13 @@ class PredictorConfig:
         trajectory reaches the cut-off (0 = average only, as the paper). Default 0.99 (a load
         drawn 1 % of the time); on the bundled Temi bags it cut the runtime MAE from 38.4 to
         23.6 min (docs/evaluation).
+    peak_source : str
+        ``"window"``: the peak is a quantile of the 5 s window means and lasts a window (the robot
+        stops on a window below its cut-off); ``"sample"``: a quantile of each window's largest
+        sample current, lasting ``peak_duration_s`` (the robot, or the test equipment, stops on
+        the first sample below the cut-off).
+    peak_duration_s : float
+        How long a sample peak lasts in the model, s (``peak_source = "sample"``).
     recalibrate_after_s : float
         Between full calibrations (at most this far apart, s) the calibrated state is propagated
         with the measured current (charge counting through the model), which is more reliable
@@ -106,6 +116,8 @@ class PredictorConfig:
     calibration_window_s: float = 600.0
     recalibrate_after_s: float = 3600.0
     peak_current_quantile: float = 0.99
+    peak_source: str = "window"
+    peak_duration_s: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -186,8 +198,12 @@ class PredictorCore:
         return self._resistance_cache[key]
 
     # ----------------------------------------------------------------- input
-    def update_state(self, stamp_s: float, voltage_v: float, current_a: float, temperature_k: float) -> None:
-        """Take a clean pack state (V, A positive = discharge, K or NaN) stamped ``stamp_s``."""
+    def update_state(self, stamp_s: float, voltage_v: float, current_a: float, temperature_k: float,
+                     peak_current_a: float = math.nan) -> None:
+        """Take a clean pack state (V, A positive = discharge, K or NaN) stamped ``stamp_s``.
+
+        ``peak_current_a`` is the window's largest sample current (A; NaN when unknown).
+        """
         if not (math.isfinite(stamp_s) and math.isfinite(voltage_v) and math.isfinite(current_a)):
             return
         with self._lock:
@@ -196,7 +212,7 @@ class PredictorCore:
                 return
             self._state = (stamp_s, voltage_v, current_a, temperature_k)
             was_charging = self._load.in_session
-            if self._load.add(stamp_s, current_a):
+            if self._load.add(stamp_s, current_a, peak_current_a):
                 self._new_state(stamp_s, "a charging session began")
             elif was_charging and not self._load.in_session:
                 self._new_state(stamp_s, "the charging session ended")
@@ -295,6 +311,9 @@ class PredictorCore:
         self._cal = (t[-1], t[-1], cal)
         return cal
 
+    def _peak_duration_s(self) -> float:
+        return self.config.peak_duration_s if self.config.peak_source == "sample" else 5.0
+
     def _temperature(self, temperature_k: float) -> float:
         return temperature_k if math.isfinite(temperature_k) and 200 < temperature_k < 400 else \
             self.default_temperature_k
@@ -310,7 +329,8 @@ class PredictorCore:
         temp = self._temperature(t_k)
         with self._lock:
             load = self._load.estimate()
-            peak = self._load.quantile_a(self.config.peak_current_quantile)
+            peak = self._load.quantile_a(self.config.peak_current_quantile,
+                                         of_peaks=self.config.peak_source == "sample")
         if v <= cutoff:
             return _invalid_runtime(stamp, cutoff, STATUS_BELOW_CUTOFF,
                                     f"pack voltage {v:.2f} V is at or below the cut-off {cutoff:.2f} V",
@@ -327,7 +347,8 @@ class PredictorCore:
         try:
             pred = predict_remaining_runtime(self.runner, v, i, temp, avg, cutoff,
                                              calibration=self.calibration(temp),
-                                             peak_current_a=peak if math.isfinite(peak) else None)
+                                             peak_current_a=peak if math.isfinite(peak) else None,
+                                             peak_duration_s=self._peak_duration_s())
         except BatteryPredictorError as exc:
             return _invalid_runtime(stamp, cutoff, STATUS_MODEL_FAILED, f"model failed: {exc}", temperature_k=temp)
         soc, soc_note = published_soc(pred.calibration.soc)
@@ -384,6 +405,9 @@ class PredictorCore:
         decision = evaluate_route(self.runner, cal.start, sections, temp, threshold_v=threshold,
                                   standstill_current_a=self.standstill_current_a, currents=self._currents)
         notes = [soc_note] if soc_note else []
+        if cal.soc < 0.05 and decision.accepted:
+            notes.append("the SOC scale's 0 is the OCV at the params' 0 % point; the pack may be used below it "
+                         "and the threshold, not the SOC, decides")
         if starts_away_from_charger:
             notes.append("starts away from the charger (state as measured now)")
         if ends_away_from_charger:

@@ -94,9 +94,13 @@ class LoadEstimator:
         self._ewma_sum = 0.0
         self._ewma_weight = 0.0
         self.currents: deque[float] = deque(maxlen=20000)
+        self.peaks: deque[float] = deque(maxlen=20000)
 
-    def add(self, stamp_s: float, current_a: float) -> bool:
-        """Take a window average (s, A positive = discharge); True when a charging session just began."""
+    def add(self, stamp_s: float, current_a: float, peak_current_a: float = math.nan) -> bool:
+        """Take a window (s, mean A positive = discharge, largest sample A or NaN).
+
+        Returns True when a charging session just began.
+        """
         dt = 0.0
         if self._last_stamp_s is not None and stamp_s > self._last_stamp_s:
             dt = min(stamp_s - self._last_stamp_s, MAX_GAP_S)
@@ -119,6 +123,7 @@ class LoadEstimator:
             self._ewma_sum = self._ewma_sum * decay + previous * (1.0 - decay)
             self._ewma_weight = self._ewma_weight * decay + (1.0 - decay)
         self.currents.append(current_a)
+        self.peaks.append(peak_current_a if math.isfinite(peak_current_a) else current_a)
         return began
 
     def _track_charging(self, dt: float, previous_a: float, current_a: float) -> bool:
@@ -150,8 +155,12 @@ class LoadEstimator:
         charging = self._in_session and self._last_current_a < -self.charge_current_a
         return LoadEstimate(mean, self._duration_s, charging, self._last_current_a if charging else math.nan)
 
-    def quantile_a(self, q: float) -> float:
-        """Quantile ``q`` of the cycle's window currents, A (NaN when none or ``q <= 0``)."""
-        if not self.currents or q <= 0:
+    def quantile_a(self, q: float, *, of_peaks: bool = False) -> float:
+        """Quantile ``q`` of the cycle's window currents (or of each window's largest sample), A.
+
+        NaN when there are none or ``q <= 0``.
+        """
+        values = self.peaks if of_peaks else self.currents
+        if not values or q <= 0:
             return math.nan
-        return float(np.quantile(np.fromiter(self.currents, float), min(q, 1.0)))
+        return float(np.quantile(np.fromiter(values, float), min(q, 1.0)))

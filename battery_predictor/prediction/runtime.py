@@ -133,7 +133,7 @@ def peak_crossing_s(runner: PackRunner, start, average_current_a: float, peak_cu
 def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: float, temperature_k: float,
                               average_current_a: float, cutoff_voltage_v: float,
                               calibration: Calibration | None = None,
-                              peak_current_a: float | None = None) -> RuntimePrediction:
+                              peak_current_a: float | None = None, peak_duration_s: float = 5.0) -> RuntimePrediction:
     """Calibrate the SOC (unless given), then simulate the average load to the cut-off.
 
     Parameters
@@ -153,6 +153,9 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
         reaches the cut-off, which happens at a load peak, not at the average load: the runtime is
         the first time a peak drawn from the average-load trajectory reaches the cut-off
         (:func:`peak_crossing_s`), not when the average load does (the paper's strategy).
+    peak_duration_s : float
+        How long a peak lasts in the model, s: the monitor's window for a peak of window means, a
+        sample's length for the largest sample of a window.
     """
     if not (math.isfinite(average_current_a) and average_current_a > 0):
         raise SimulationError(f"average discharge current must be > 0 A, got {average_current_a}")
@@ -164,7 +167,7 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
     run = runner.run(cal.start, [(horizon_s, average_current_a)], temperature_k)
     if peak_current_a is not None and peak_current_a > average_current_a:
         t_peak = peak_crossing_s(runner, cal.start, average_current_a, float(peak_current_a), temperature_k,
-                                 cutoff_voltage_v, run)
+                                 cutoff_voltage_v, run, settle_s=peak_duration_s)
         if t_peak is not None:
             return RuntimePrediction(t_peak, cal, average_current_a, temperature_k, cutoff_voltage_v, "peak_cutoff")
     t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)

@@ -33,6 +33,7 @@ def test_pack_state_fields() -> None:
         "header": "std_msgs/Header",
         "voltage_v": "double",
         "current_a": "double",
+        "peak_current_a": "double",
         "temperature_k": "double",
         "window_s": "double",
         "samples_used": "uint32",

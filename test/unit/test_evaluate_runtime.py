@@ -23,7 +23,8 @@ PARAMS = REPO / "params" / "panasonic_18650pf.yaml"
 
 def windows(time_s, voltage_v, current_a) -> Windows:
     t = np.asarray(time_s, float)
-    return Windows(t, np.asarray(voltage_v, float), np.asarray(current_a, float), np.full(t.size, math.nan))
+    i = np.asarray(current_a, float)
+    return Windows(t, np.asarray(voltage_v, float), i, np.full(t.size, math.nan), i)
 
 
 def test_discharge_ends_at_the_first_window_at_the_cutoff():

@@ -229,3 +229,15 @@ def test_random_garbage_never_reaches_the_averages():
         assert s.voltage_v == pytest.approx(volts[in_window].mean())
         assert s.samples_used == in_window.sum()
     assert mon.rejected_total == bad.sum()
+
+
+def test_windows_carry_their_largest_sample_current_and_offline_windows_match_the_monitor():
+    from battery_predictor.monitoring import monitor_windows
+
+    t = np.arange(0.0, 20.0, 1.0)
+    i = np.array([1.0, 3.0, 2.0, -1.0, 1.5] * 4)
+    v = np.full(t.size, 15.0)
+    snaps = monitor_windows(t, v, i)
+    assert [s.stamp_s for s in snaps] == [5.0, 10.0, 15.0, 20.0]
+    assert all(s.peak_current_a == 3.0 and s.current_a == pytest.approx(1.3) for s in snaps)
+    assert all(not s.stale for s in snaps)
