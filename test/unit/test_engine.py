@@ -249,3 +249,24 @@ def test_simulator_reuses_one_extraction_for_scalable_parameter_changes(temi_par
     assert sim.extractions == 1
     assert base.extra["engine_seconds"] < base.seconds
     assert thinner.pack_voltage_v[-1] < base.pack_voltage_v[-1]  # less positive material: deeper discharge
+
+
+@pytest.mark.parametrize("soc, ocv_v", [(0.0, None), (0.35, None), (1.0, None), (None, 3.7)])
+def test_initial_state_matches_pybamm_get_initial_stoichiometries(temi_params, temi_spm, soc, ocv_v):
+    from battery_predictor.simulation.cell_setup import initial_concentrations, prepared_parameter_values
+    from battery_predictor.simulation.engine.state import StoichiometryWindow
+
+    model, _ = temi_spm
+    pv = prepared_parameter_values(temi_params)
+    got = StoichiometryWindow(model, pv).concentrations(soc=soc, ocv_v=ocv_v)
+    want = initial_concentrations(temi_params, pv, initial_soc=soc, initial_cell_ocv_v=ocv_v)
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_initial_state_refuses_an_unreachable_voltage(temi_params, temi_spm):
+    from battery_predictor.simulation.cell_setup import prepared_parameter_values
+    from battery_predictor.simulation.engine.state import StoichiometryWindow
+
+    model, _ = temi_spm
+    with pytest.raises(SimulationError, match="open-circuit voltage of 6.0000 V"):
+        StoichiometryWindow(model, prepared_parameter_values(temi_params)).concentrations(ocv_v=6.0)

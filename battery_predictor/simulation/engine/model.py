@@ -55,6 +55,8 @@ _SURFACE_VARIABLES = {
     "negative": "X-averaged negative particle surface concentration [mol.m-3]",
     "positive": "X-averaged positive particle surface concentration [mol.m-3]",
 }
+#: Voltage evaluation points per NumPy call.
+_VOLTAGE_CHUNK = 16384
 #: Largest relative deviation from linearity accepted in the extracted particle equations.
 _LINEARITY_RTOL = 1e-9
 
@@ -127,8 +129,11 @@ class LinearSpm:
         aux = np.empty((len(rows), size))
         for k, row in enumerate(rows):
             aux[k] = np.broadcast_to(np.asarray(row, dtype=float), shape).ravel()
-        out = self._evaluator(0.0, aux)
-        return np.asarray(out, dtype=float).reshape(shape)
+        out = np.empty(size)
+        for first in range(0, size, _VOLTAGE_CHUNK):  # chunks keep the temporaries in cache
+            cols = slice(first, min(first + _VOLTAGE_CHUNK, size))
+            out[cols] = np.asarray(self._evaluator(0.0, aux[:, cols]), dtype=float).ravel()
+        return out.reshape(shape)
 
     @functools.cached_property
     def _evaluator(self):

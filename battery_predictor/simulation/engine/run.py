@@ -242,7 +242,7 @@ def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nd
     end_v = np.where(cols >= cutoff_step[:, None], np.nan, end_v)
     used = "numpy" if backend == "numpy" or not numba_available() else "numba"
     extra = {"checkpoints": checkpoints, "stride": stride, "z_end": z_end, "lam": batch.lam, "drive": batch.drive,
-             "batch": batch, "backend": used}
+             "batch": batch, "backend": used, "surfaces": surfaces}
     return CellRuns(step_start_s=edges[:-1], start_voltage_v=start_v, end_voltage_v=end_v, end_time_s=end_time,
                     reached_cutoff=any_below, cutoff_step=cutoff_step, extra=extra)
 
@@ -291,7 +291,7 @@ def _cutoff_in_step(model: LinearSpm, modal: ModalSystem, batch: _Batch, z_k: np
 
 
 def states_at_times(runs: CellRuns, modal: ModalSystem, duration_s, cell_current_a, time_s) -> np.ndarray:
-    """Surface values (n_sets, n_times, 2) at ``time_s`` (right-continuous), from a run with ``stride`` 1."""
+    """Surface values (n_sets, n_times, 2) at ``time_s`` (right-continuous), from a run that kept its states."""
     if runs.extra.get("stride") != 1:
         raise SimulationError("states at arbitrary times need a run that kept every state (keep_states=True)")
     duration_s = np.asarray(duration_s, dtype=float)
@@ -299,18 +299,29 @@ def states_at_times(runs: CellRuns, modal: ModalSystem, duration_s, cell_current
     time_s = np.asarray(time_s, dtype=float)
     step = np.clip(np.searchsorted(runs.step_start_s, time_s, side="right") - 1, 0, duration_s.size - 1)
     tau = time_s - runs.step_start_s[step]
-    z_start = runs.extra["checkpoints"][:, step]  # (n_sets, n_times, n_modes)
-    lam = runs.extra["lam"][:, None, :]
-    drive = runs.extra["drive"][:, None, :]
-    decay, phi = step_coefficients(lam, tau[None, :, None])
-    z = decay * z_start + phi * drive * current[step][None, :, None]
-    return z @ modal.surface_weights.T
+    out = runs.extra["surfaces"][:, step].copy()
+    inside = np.nonzero(tau > 0.0)[0]
+    if inside.size:
+        z_start = runs.extra["checkpoints"][:, step[inside]]  # (n_sets, n_inside, n_modes)
+        decay, phi = step_coefficients(runs.extra["lam"][:, None, :], tau[inside][None, :, None])
+        z = decay * z_start + phi * runs.extra["drive"][:, None, :] * current[step[inside]][None, :, None]
+        out[:, inside] = z @ modal.surface_weights.T
+    return out
 
 
 def voltages_at_times(model: LinearSpm, runs: CellRuns, modal: ModalSystem, duration_s, cell_current_a,
                       time_s) -> np.ndarray:
-    """Cell voltage (V, n_sets x n_times) at ``time_s`` under the current in force there (right-continuous)."""
-    surfaces = states_at_times(runs, modal, duration_s, cell_current_a, time_s)
-    step = np.clip(np.searchsorted(runs.step_start_s, np.asarray(time_s, float), side="right") - 1, 0,
-                   np.size(duration_s) - 1)
-    return _voltage(model, runs.extra["batch"], surfaces, np.asarray(cell_current_a, float)[step][None, :])
+    """Cell voltage (V, n_sets x n_times) at ``time_s`` under the current in force there (right-continuous).
+
+    Times on a step start reuse the run's start voltages; the others are stepped into their step.
+    """
+    time_s = np.asarray(time_s, dtype=float)
+    current = np.asarray(cell_current_a, dtype=float)
+    step = np.clip(np.searchsorted(runs.step_start_s, time_s, side="right") - 1, 0, np.size(duration_s) - 1)
+    on_start = time_s == runs.step_start_s[step]
+    out = runs.start_voltage_v[:, step].copy()
+    inside = np.nonzero(~on_start | np.isnan(out).any(axis=0))[0]
+    if inside.size:
+        surfaces = states_at_times(runs, modal, duration_s, current, time_s[inside])
+        out[:, inside] = _voltage(model, runs.extra["batch"], surfaces, current[step[inside]][None, :])
+    return out

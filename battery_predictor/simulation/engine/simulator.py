@@ -23,11 +23,12 @@ import numpy as np
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.base import PackSimResult, SimulationRequest
-from battery_predictor.simulation.cell_setup import initial_concentrations, prepared_parameter_values
+from battery_predictor.simulation.cell_setup import prepared_parameter_values
 from battery_predictor.simulation.engine.modal import ModalSystem, modal_system
 from battery_predictor.simulation.engine.model import C_N0, C_P0, EPS_N, EPS_P, HEIGHT, LinearSpm, extract_linear_spm
 from battery_predictor.simulation.engine.pack import pack_voltage_v
 from battery_predictor.simulation.engine.run import ParameterSets, run_cells, voltages_at_times
+from battery_predictor.simulation.engine.state import StoichiometryWindow
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 LOG = logging.getLogger(__name__)
@@ -72,6 +73,7 @@ class EngineSimulator:
         self.fallback = fallback
         self.cache_size = cache_size
         self._cache: OrderedDict[tuple, tuple[LinearSpm, ModalSystem]] = OrderedDict()
+        self._values: dict[tuple, object] = {}
         self.extractions = 0
 
     # ----------------------------------------------------------------- public
@@ -122,7 +124,7 @@ class EngineSimulator:
             self._cache[key] = (model, modal)
             if len(self._cache) > self.cache_size:
                 self._cache.popitem(last=False)
-        pv = params.parameter_values()
+        pv = self._parameter_values(params)
         factors = {}
         for pybamm_key, field_name in SCALABLE_KEYS.items():
             value = pv[pybamm_key]
@@ -131,12 +133,29 @@ class EngineSimulator:
             factors[field_name] = float(value) / model.built_values[pybamm_key]
         return model, modal, ParameterSets(**factors)
 
+    def _initial_concentrations(self, params, request: SimulationRequest, model: LinearSpm) -> tuple[float, float]:
+        """(c_n, c_p) in mol/m3 for the request's SOC or pack open-circuit voltage, else the params' own."""
+        pv = self._parameter_values(params)
+        if request.initial_soc is None and request.initial_pack_ocv_v is None:
+            return float(pv[C_N0]), float(pv[C_P0])
+        window = StoichiometryWindow(model, pv)
+        if request.initial_soc is not None:
+            return window.concentrations(soc=float(request.initial_soc))
+        return window.concentrations(ocv_v=float(request.initial_pack_ocv_v) / params.series)
+
+    def _parameter_values(self, params):
+        """The params' PyBaMM parameter values (cached on the cell values; do not modify the result)."""
+        key = (params.base_parameter_set, repr(sorted(params.cell_values.items())))
+        if key not in self._values:
+            if len(self._values) >= self.cache_size:
+                self._values.pop(next(iter(self._values)))
+            self._values[key] = prepared_parameter_values(params)
+        return self._values[key]
+
     def _simulate(self, params, request: SimulationRequest, model: LinearSpm, modal: ModalSystem,
                   sets: ParameterSets, tic: float) -> PackSimResult:
-        pv = prepared_parameter_values(params)
         temperature_k = float(request.ambient_temperature_k or params.ambient_temperature_k)
-        cell_ocv = None if request.initial_pack_ocv_v is None else request.initial_pack_ocv_v / params.series
-        c_n0, c_p0 = initial_concentrations(params, pv, initial_soc=request.initial_soc, initial_cell_ocv_v=cell_ocv)
+        c_n0, c_p0 = self._initial_concentrations(params, request, model)
         load = request.load
         duration_s = np.diff(load.edges_s())
         cell_current_a = load.current_a / params.parallel
