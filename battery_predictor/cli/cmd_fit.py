@@ -1,18 +1,49 @@
-"""``battery-predictor fit``: TPE fit of a pack model to measured discharges (R2_mod)."""
+"""``battery-predictor fit``: fit a pack model to measured discharges (R2_mod).
+
+Two methods: ``identify`` (default) searches the identifiable coordinates of
+:mod:`battery_predictor.fitting.identifiable` with seeded TPE then trust-region least squares and
+reports identifiability; ``tpe`` is the seed paper's TPE over the params' raw ``fit.parameters``
+(chosen automatically when ``--trials`` is given).
+"""
 
 from __future__ import annotations
 
 import datetime as _dt
 from pathlib import Path
 
-from battery_predictor.cli.common import add_data_arguments, load_data, print_json
+from battery_predictor.cli.common import (
+    add_data_arguments,
+    check_output_file,
+    check_plot_file,
+    data_options,
+    load_data,
+    print_json,
+    progress_wanted,
+)
+
+#: Default budget of ``--method identify`` in model evaluations.
+DEFAULT_EVALUATIONS = 400
 
 
 def register(sub) -> None:
-    p = sub.add_parser("fit", help="fit the params' fit parameters to measured data with TPE")
+    p = sub.add_parser("fit", help="fit a pack model to measured data (identifiable coordinates, or the paper's TPE)")
     p.add_argument("--params", required=True, help="params YAML to start from")
     add_data_arguments(p)
-    p.add_argument("--trials", type=int, default=1000, help="total TPE trials (default 1000)")
+    p.add_argument("--method", choices=("identify", "tpe"), default=None,
+                   help="identify: TPE + least squares in identifiable coordinates (default); tpe: the paper's TPE "
+                        "over fit.parameters (default when --trials is given)")
+    p.add_argument("--evaluations", type=int, default=DEFAULT_EVALUATIONS,
+                   help=f"identify: budget in model evaluations (default {DEFAULT_EVALUATIONS})")
+    p.add_argument("--tpe-fraction", type=float, default=None,
+                   help="identify: share of the budget spent in TPE before the refinement (default 0.25)")
+    p.add_argument("--starts", type=int, default=None,
+                   help="identify: refinements from the best distinct TPE candidates (default 3)")
+    p.add_argument("--coordinates", nargs="+", default=(), metavar="NAME",
+                   help="identify: optional coordinates to search as well (negative_diffusivity_m2_s, "
+                        "positive_diffusivity_m2_s)")
+    p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
+                   help="average the data over windows of this many seconds first (as the battery monitor does)")
+    p.add_argument("--trials", type=int, default=None, help="tpe: total TPE trials (default 1000)")
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
     p.add_argument("--storage", default=None,
                    help="Optuna storage URL (default: sqlite file next to --out); a stopped fit resumes")
@@ -30,15 +61,26 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    args.no_progress = not progress_wanted(args)  # bars only on an interactive stderr, never with --json
+    method = args.method or ("tpe" if args.trials is not None else "identify")
+    if method == "identify":
+        from battery_predictor.cli.fit_identify import run_identify
+
+        return run_identify(args)
+    if args.trials is None:
+        args.trials = 1000
     from battery_predictor.fitting.optimiser import TPEOptimiser
     from battery_predictor.fitting.problem import FitProblem
+    from battery_predictor.fitting.resample import resample_all
     from battery_predictor.fitting.space import fit_space
     from battery_predictor.params import load_params
     from battery_predictor.plots import plot_voltage_fit
     from battery_predictor.simulation import get_simulator
 
+    check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
+    check_plot_file(args.plot or Path(args.out).with_suffix(".png"))
     params = load_params(args.params)
-    recs = load_data(args.data, trim=not args.no_trim, duplicate_times=args.duplicate_times)
+    recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
     out = Path(args.out)
     storage = args.storage or f"sqlite:///{out.with_suffix('.optuna.db').resolve()}"
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -14,6 +14,8 @@ def register(sub) -> None:
     p.add_argument("--simulator", choices=("fast", "liionpack"), default="fast")
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto",
                    help="initial state: params' concentrations or first measured voltage (default auto)")
+    p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
+                   help="average the data over windows of this many seconds first (as the battery monitor does)")
     p.add_argument("--plot", default=None, help="write measured vs simulated voltage to this PNG")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -22,6 +24,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from battery_predictor.fitting.cost import r2_mod, rmse_v
     from battery_predictor.fitting.problem import request_for_recording
+    from battery_predictor.fitting.resample import resample_all
     from battery_predictor.params import load_params
     from battery_predictor.simulation import get_simulator
 
@@ -29,7 +32,7 @@ def run(args) -> int:
         check_plot_file(args.plot)
     tic = time.perf_counter()
     params = load_params(args.params)
-    recs = load_data(args.data, pack=params, **data_options(args))
+    recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
     sim = get_simulator(args.simulator)
     rows, results = [], []
     for rec in recs:
