@@ -69,7 +69,7 @@ def resample_windows(rec: Recording, window_s: float) -> Recording:
 
 
 def resample_all(recordings, window_s: float | None) -> list[Recording]:
-    """:func:`resample_windows` on every recording; ``None`` or 0 keeps them unchanged."""
-    if not window_s:
+    """:func:`resample_windows` on every recording; ``None`` keeps them unchanged."""
+    if window_s is None:
         return list(recordings)
     return [resample_windows(r, window_s) for r in recordings]

@@ -81,7 +81,9 @@ def fit_space(params: PackParams, names: tuple[str, ...] | None = None) -> list[
     Default bounds follow the seed paper's rule (:func:`default_bounds`); initial electrode
     concentrations are additionally kept below their electrode's maximum concentration
     (:data:`INITIAL_STOICHIOMETRY_RANGE`), which the paper's 50-150 % rule violates for
-    Chen2020's negative electrode (29866 of 33133 mol/m3). Explicit ``fit.bounds`` are kept as given.
+    Chen2020's negative electrode (29866 of 33133 mol/m3); the params' own value always stays
+    inside (a shipped value above the cap of the lowest searched maximum widens the range to it).
+    Explicit ``fit.bounds`` are kept as given.
     """
     names = tuple(names if names is not None else params.fit.parameters)
     if not names:
@@ -97,6 +99,7 @@ def fit_space(params: PackParams, names: tuple[str, ...] | None = None) -> list[
             if name.startswith("Initial concentration in"):
                 lo, hi = _feasible_initial_concentration(name, lo, hi, params,
                                                          {k: v[:2] for k, v in decided.items()})
+            lo, hi = min(lo, initial), max(hi, initial)  # the params' own value is always searchable
         decided[name] = (lo, hi, log)
     return [FitParameter(name=n, initial=params.value(n), low=decided[n][0], high=decided[n][1], log=decided[n][2])
             for n in names]

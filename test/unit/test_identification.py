@@ -26,6 +26,7 @@ from battery_predictor.fitting.identification import (
     startup_trials,
 )
 from battery_predictor.fitting.resample import resample_windows
+from battery_predictor.fitting.space import fit_space
 from battery_predictor.params import load_params
 from battery_predictor.recording import Recording
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
@@ -47,6 +48,13 @@ def test_shipped_params_lie_inside_their_own_default_search_space(path):
     for coord in default_space(params):
         assert coord.low < coord.high
         assert coord.contains(shipped[coord.name]), (coord.name, shipped[coord.name], coord.low, coord.high)
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_shipped_params_lie_inside_the_papers_raw_search_space_too(path):
+    params = load_params(path)
+    for p in fit_space(params):
+        assert p.low <= p.initial <= p.high, (p.name, p.initial, p.low, p.high)
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
