@@ -8,6 +8,9 @@
 2. Luggage robot (Ranger Mini): a bundled bag (BatteryState) is replayed up to a
    given time, and ``/can_accept_route`` is asked over the middleware for the
    paper's longest route with 20, 40, 60 and 80 kg; the decisions are printed.
+3. Where the figures come from: the bundled bags are emulated (made from the shipped params);
+   the figures measured on real cells (``docs/runtime_real_data``, made by
+   ``battery-predictor evaluate-runtime``) are printed beside them.
 
 The nodes run on a ROS domain of their own with discovery kept on this machine,
 so the demo never talks to another ROS system. Takes about a minute.
@@ -28,6 +31,7 @@ NODE_PARAMS = REPO / "params" / "ros"
 DEMO_TEMI_BAG = "temi_dynamic_pack1"
 DEMO_RANGER_BAG = "ranger_stepwise_pack1"
 DEMO_RANGER_AT_MIN = 341.0
+REAL_DATA_SUMMARY = REPO / "docs" / "runtime_real_data" / "summary.json"
 PAYLOADS_KG = (20.0, 40.0, 60.0, 80.0)
 
 
@@ -172,6 +176,25 @@ def output_dir(out: str | None) -> Iterator[Path]:
     yield path
 
 
+def _real_data_figures(path: Path) -> None:
+    """Print the measured-cell runtime figures beside the emulated ones (what a reader should trust)."""
+    import json
+
+    print("3) where these figures come from: the bags above are EMULATED (bags/README.md), made from the")
+    print("   shipped params, so the model starts next to the truth.")
+    if not path.is_file():
+        print(f"   no measured-data figures found ({path.relative_to(REPO)} is missing)")
+        return
+    summary = json.loads(path.read_text())
+    pooled = summary["pooled"]
+    cells = ", ".join(Path(r["source"]).stem for r in summary["per_recording"])
+    print(f"   MEASURED cells ({Path(summary['params']).name}; {len(summary['per_recording'])} held-out recordings: "
+          f"{cells}), {path.parent.relative_to(REPO)}/report.md:")
+    for name, fig in pooled.items():
+        print(f"      {name:<18} remaining-runtime MAE {fig['mae_min']:.1f} min, bias {fig['bias_min']:+.1f} min, "
+              f"{fig['answered']}/{fig['checkpoints']} answered")
+
+
 def run(args) -> int:
     temi_bag, ranger_bag = _bag(args.temi_bag), _bag(args.ranger_bag)
     with output_dir(args.out) as out:
@@ -181,6 +204,7 @@ def run(args) -> int:
             _ranger(context, ranger_bag, args.ranger_at_min, args.rate)
         finally:
             context.try_shutdown()
+    _real_data_figures(REAL_DATA_SUMMARY)
     if args.out is None:
         print("(the plot and node outputs were in a temporary directory, now removed; pass --out DIR to keep them)")
     return 0

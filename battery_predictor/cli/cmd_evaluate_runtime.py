@@ -144,7 +144,7 @@ def _print_pooled(summary: dict) -> None:
     for name, f in summary["pooled"].items():
         print(_line(name, f))
     if "out" in summary:
-        print(f"written: {summary['out']}/summary.json, checkpoints.json, runtime.png")
+        print(f"written: {summary['out']}/report.md, summary.json, checkpoints.json, runtime.png")
 
 
 def _write_outputs(out_dir: Path, summary: dict, results) -> None:
@@ -157,3 +157,32 @@ def _write_outputs(out_dir: Path, summary: dict, results) -> None:
     rows = json.loads(json.dumps(result_rows(results), default=str).replace("NaN", "null"))
     (out_dir / "checkpoints.json").write_text(json.dumps(rows, indent=1) + "\n")
     plot_runtime(results, out_dir / "runtime.png")
+    (out_dir / "report.md").write_text(report_markdown(summary))
+
+
+def report_markdown(summary: dict) -> str:
+    """The figures as a Markdown report (per recording and pooled, predictor beside the counters)."""
+    import shlex
+    import sys
+
+    names = list(summary["pooled"])
+    head = "| recording | degC | min | " + " | ".join(f"{n} MAE / bias / worst late %" for n in names) + " |"
+    lines = ["# Remaining runtime on measured recordings", "",
+             f"Made by `battery-predictor {' '.join(shlex.quote(a) for a in sys.argv[1:])}`", "",
+             f"Params `{Path(summary['params']).name}`, cut-off {summary['cutoff_v']:.2f} V, peaks from "
+             f"{summary['peak_source']}s, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
+             "discharge. Counter capacities: " + ", ".join(f"{k} {v:.3f} Ah" for k, v in summary["capacities_ah"].items())
+             + ". MAE / bias in min; worst late % = the largest error relative to the true remaining time after "
+             f"{summary['late_after_fraction']:.0%} of the discharge.", "", head,
+             "|" + "---|" * (3 + len(names))]
+
+    def cells(block: dict) -> str:
+        return " | ".join(f"{_fmt(block[n]['mae_min'])} / {_fmt(block[n]['bias_min'], '+.1f')} / "
+                          f"{_fmt(block[n]['worst_late_pct'], '.0f')}" for n in names)
+
+    for r in summary["per_recording"]:
+        lines.append(f"| {Path(r['source']).name} ({r['ended_by']}) | {_fmt(r['mean_temperature_c'])} | "
+                     f"{_fmt(r['discharge_min'])} | {cells(r)} |")
+    lines.append(f"| **pooled** | | | {cells(summary['pooled'])} |")
+    lines += ["", "![predicted vs true remaining runtime](runtime.png)", ""]
+    return "\n".join(lines)

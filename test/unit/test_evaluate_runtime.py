@@ -94,6 +94,7 @@ def test_cli_scores_the_predictor_and_the_counters_on_a_discharge(model_discharg
     discharge_min = summary["per_recording"][0]["discharge_min"]
     assert pooled["predictor"]["mae_min"] < 0.05 * discharge_min  # its own model: close to the truth
     assert (out / "summary.json").is_file() and (out / "runtime.png").stat().st_size > 1000
+    assert "| **pooled** |" in (out / "report.md").read_text()
     rows = json.loads((out / "checkpoints.json").read_text())
     assert [r["fraction"] for r in rows] == [0.2, 0.5, 0.8]
 
