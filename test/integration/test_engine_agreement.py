@@ -74,3 +74,14 @@ def test_engine_matches_pybamm_on_a_us06_drive_cycle_excerpt():
     assert np.unique(np.round(np.diff(load.edges_s()), 6)).size > 1  # the varying-step path ran
     assert rms_v <= RMS_LIMIT_V
     assert cutoff_fraction <= CUTOFF_LIMIT_FRACTION
+
+
+def test_engine_matches_pybamm_with_a_contact_resistance(temi_params):
+    from battery_predictor.profiles.temi import generate_usage_profile
+
+    params = temi_params.with_values({"Contact resistance [Ohm]": 0.02}, extensions=("resistance_growth",))
+    load = StepLoad.from_profile(generate_usage_profile(seed=2, max_duration_s=1800)).scale_current(4.0).resample(5.0)
+    rms_v, cutoff_fraction, engine = _compare(params, load, initial_soc=0.12)
+    assert "engine_fallback" not in engine.extra
+    assert rms_v <= RMS_LIMIT_V
+    assert cutoff_fraction <= CUTOFF_LIMIT_FRACTION

@@ -164,9 +164,19 @@ def test_parameter_set_factors_match_a_pybamm_rebuild(temi_params, temi_spm, cha
     np.testing.assert_allclose(scaled.start_voltage_v, direct.start_voltage_v, rtol=0, atol=1e-9)
 
 
-def test_engine_refuses_a_model_it_does_not_cover(temi_params):
-    with pytest.raises(SimulationError, match="isothermal SPM"):
-        extract_linear_spm(temi_params.with_values({}, extensions=("temperature",)))
+@pytest.mark.parametrize("extension, message", [("temperature", "not a constant"),
+                                                ("electrolyte_transport", "other than through surface values")])
+def test_extraction_refuses_a_model_that_is_not_linear_particles_and_a_voltage(temi_params, extension, message):
+    with pytest.raises(SimulationError, match=message):
+        extract_linear_spm(temi_params.with_values({}, extensions=(extension,)))
+
+
+def test_contact_resistance_option_reaches_the_extracted_voltage(temi_params, temi_spm):
+    model, _ = temi_spm
+    with_contact = extract_linear_spm(temi_params.with_values({"Contact resistance [Ohm]": 0.01},
+                                                              extensions=("resistance_growth",)))
+    drop = model.cell_voltage_v(0.5, 0.5, 2.0, 298.15) - with_contact.cell_voltage_v(0.5, 0.5, 2.0, 298.15)
+    assert drop == pytest.approx(0.02, abs=1e-12)
 
 
 def test_pack_voltage_is_series_cells_minus_interconnect_drop():
@@ -228,7 +238,7 @@ def test_simulator_falls_back_visibly_for_what_the_engine_does_not_cover(temi_pa
     from battery_predictor.simulation.engine.simulator import EngineSimulator
 
     request = SimulationRequest(load=StepLoad.constant(3.0, 60.0), initial_soc=0.5)
-    params = temi_params.with_values({}, extensions=("resistance_growth",))
+    params = temi_params.with_values({}, extensions=("cell_imbalance",))
     with caplog.at_level("WARNING"):
         result = EngineSimulator(fallback=_StubSimulator()).simulate(params, request)
     assert result.extra["engine_fallback"].startswith("stub: ")

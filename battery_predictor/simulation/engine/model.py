@@ -151,10 +151,8 @@ class LinearSpm:
 def _built_simulation(params):
     import pybamm
 
-    if params.model != "SPM" or params.options or params.extensions:
-        raise SimulationError(f"{params.source}: the engine handles the isothermal SPM without options or "
-                              f"extensions (model {params.model}, options {dict(params.options)}, extensions "
-                              f"{list(params.extensions)})")
+    if params.model != "SPM":
+        raise SimulationError(f"{params.source}: the engine handles the SPM, not the {params.model}")
     pv = prepared_parameter_values(params)
     built = {key: float(pv[key]) for key in (C_N0, C_P0, T_AMB, EPS_N, EPS_P, HEIGHT)}
     for electrode in ("Negative", "Positive"):
@@ -263,11 +261,14 @@ def _voltage_symbol(model, slices: dict[str, slice]):
 def extract_linear_spm(params) -> LinearSpm:
     """PyBaMM's discretised SPM of ``params``' cell as a :class:`LinearSpm`.
 
+    Model options and extensions are taken as PyBaMM builds them; the extraction checks what it
+    relies on.
+
     Raises
     ------
     SimulationError
-        When the model is not an isothermal SPM whose particle equations are linear and whose
-        voltage depends on the state through the two surface values only.
+        When the model is not an SPM whose particle equations are linear with constant
+        coefficients and whose voltage depends on the state through the two surface values only.
     """
     model, built, cutoff = _built_simulation(params)
     slices = _block_slices(model)

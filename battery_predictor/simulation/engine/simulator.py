@@ -7,8 +7,10 @@ by the engine. Cells that differ from a built one only in particle radii, diffus
 electrode thicknesses, active material volume fractions and electrode height reuse its
 extraction (scaling, no PyBaMM rebuild).
 
-What the engine does not cover (models other than the isothermal SPM, model options, extensions,
-concentration-dependent diffusivities, per-cell values) is simulated by the fallback simulator
+What the engine does not cover (models other than the SPM, the extensions outside
+:data:`CELL_MODEL_EXTENSIONS`, model options or states that the voltage depends on beyond the
+particle surfaces, concentration- or temperature-dependent diffusivities, per-cell values) is
+simulated by the fallback simulator
 (the fast one by default); the result says so in ``extra["engine_fallback"]`` and a warning is
 logged, so a fallback is never silent.
 """
@@ -46,6 +48,10 @@ SCALABLE_KEYS = {
     HEIGHT: "height",
 }
 _STATE_KEYS = frozenset({C_N0, C_P0})
+#: Extensions whose whole effect is inside PyBaMM's cell model (model options, parameter values) or
+#: outside the simulator (the current offset is applied where a recording becomes a load); the
+#: extraction checks that the model still splits into linear particles and a voltage function.
+CELL_MODEL_EXTENSIONS = ("capacity_fade", "current_offset", "hysteresis", "resistance_growth")
 
 
 class EngineSimulator:
@@ -95,9 +101,11 @@ class EngineSimulator:
         """Why the engine cannot simulate ``request`` on ``params`` (None when it can)."""
         if request.cell_inputs:
             return "per-cell values need liionpack"
-        if params.model != "SPM" or params.options or params.extensions:
-            return (f"the engine covers the isothermal SPM without options or extensions (model {params.model}, "
-                    f"options {dict(params.options)}, extensions {list(params.extensions)})")
+        if params.model != "SPM":
+            return f"the engine covers the SPM, not the {params.model}"
+        outside = sorted(set(params.extensions) - set(CELL_MODEL_EXTENSIONS))
+        if outside:
+            return f"the engine does not cover the extensions {outside}"
         return None
 
     # ---------------------------------------------------------------- helpers
@@ -113,7 +121,7 @@ class EngineSimulator:
         """The extraction for ``params`` (cached on everything but scalable values) and its scale factors."""
         values = params.cell_values
         fixed = tuple(sorted((k, repr(v)) for k, v in values.items() if k not in SCALABLE_KEYS and k not in _STATE_KEYS))
-        key = (params.base_parameter_set, params.model, fixed)
+        key = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions, fixed)
         if key in self._cache:
             self._cache.move_to_end(key)
             model, modal = self._cache[key]
