@@ -12,8 +12,8 @@
   fractions, porosities and other fractions in (0, 1]; cut-offs and open-circuit voltages at 0 % /
   100 % SOC in increasing order; initial electrode concentrations at most the maximum.
 * ``interconnect``: each resistance at most :data:`MAX_INTERCONNECT_OHM`.
-* ``thresholds`` and ``operating``, by unit suffix: voltages (``_v``) within the pack's voltage window
-  (:func:`pack_voltage_window_v`), currents, durations, masses, lengths >= 0, temperatures
+* ``thresholds`` and ``operating``, by unit suffix: voltages (``*_voltage_v``) within the pack's voltage
+  window (:func:`pack_voltage_window_v`), other ``_v`` values (differences) within +- its top, currents, durations, masses, lengths >= 0, temperatures
   (``_k``, ``_c``) within :data:`TEMPERATURE_RANGE_K`, ``_pct`` 0..100, ``_fraction`` 0..1,
   ``_c_rate`` and ``_hz`` > 0.
 
@@ -211,8 +211,11 @@ def _check_suffixed(params: PackParams, section: str, values: Mapping[str, float
         where = f"{section}.{key}"
         if key.endswith("_m_s"):
             _check_range(src, where, value, 0.0, None)
-        elif key.endswith("_v"):
+        elif key.endswith("_voltage_v"):
             check_voltage_in_window(where, value, params)
+        elif key.endswith("_v"):  # a voltage difference (margin, hysteresis)
+            high = pack_voltage_window_v(params)[1]
+            _check_range(src, where, value, -high, high, "a voltage difference within the pack's voltage")
         elif key.endswith("_k"):
             _check_range(src, where, value, *TEMPERATURE_RANGE_K, "a temperature in K")
         elif key.endswith("_c") and not key.endswith("_c_rate"):
