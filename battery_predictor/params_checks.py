@@ -276,6 +276,16 @@ def check_recordings_against_pack(params: PackParams, recordings: Iterable[Recor
                 f"{low:.3g}..{high:.3g} V: the recording is not of this pack (or pack.series is wrong)")
 
 
+def check_node_voltages(source: str, params: PackParams, voltages: Mapping[str, float]) -> None:
+    """Raise :class:`ParamsError` unless every set node voltage (``cutoff_voltage_v``...) lies in the pack's window.
+
+    0 and NaN mean "from the params file" and are not checked.
+    """
+    for key, value in voltages.items():
+        if value and math.isfinite(value):
+            check_voltage_in_window(key, float(value), params, source=source)
+
+
 def check_monitor_range(min_voltage_v: float, max_voltage_v: float, params: PackParams, source: str) -> None:
     """Raise :class:`ParamsError` unless the monitor's accepted voltages cover the pack's voltage window.
 

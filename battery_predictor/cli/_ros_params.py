@@ -60,7 +60,7 @@ def check_nodes_against_pack(source: Path, monitor: dict, predictor: dict, *, pa
     """
     from battery_predictor.nodes._params import resolve_params_file
     from battery_predictor.params import load_params
-    from battery_predictor.params_checks import check_monitor_range, check_voltage_in_window
+    from battery_predictor.params_checks import check_monitor_range, check_node_voltages
 
     name = pack or str(predictor.get("params_file", "") or "")
     if not name:
@@ -74,7 +74,5 @@ def check_nodes_against_pack(source: Path, monitor: dict, predictor: dict, *, pa
     if "min_voltage_v" in monitor or "max_voltage_v" in monitor:
         check_monitor_range(float(monitor.get("min_voltage_v", 0.0)), float(monitor.get("max_voltage_v", 100.0)),
                             params, str(source))
-    for key in ("cutoff_voltage_v", "route_min_voltage_v"):
-        value = float(predictor.get(key, 0.0) or 0.0)
-        if value:
-            check_voltage_in_window(f"predictor.{key}", value, params, source=str(source))
+    check_node_voltages(str(source), params, {f"predictor.{key}": float(predictor.get(key, 0.0) or 0.0)
+                                              for key in ("cutoff_voltage_v", "route_min_voltage_v")})
