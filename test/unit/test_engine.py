@@ -280,3 +280,30 @@ def test_initial_state_refuses_an_unreachable_voltage(temi_params, temi_spm):
     model, _ = temi_spm
     with pytest.raises(SimulationError, match="open-circuit voltage of 6.0000 V"):
         StoichiometryWindow(model, prepared_parameter_values(temi_params)).concentrations(ocv_v=6.0)
+
+
+def test_batch_equals_one_simulation_per_set(temi_params):
+    from battery_predictor.simulation import SimulationRequest, StepLoad
+    from battery_predictor.simulation.engine.simulator import EngineSimulator
+
+    sim = EngineSimulator(fallback=None)
+    load = StepLoad.from_durations(np.full(120, 5.0), np.random.default_rng(9).uniform(5.0, 25.0, 120))
+    request = SimulationRequest(load=load, initial_soc=0.3, output_time_s=load.start_s)
+    values = {HEIGHT: np.array([0.85, 0.9]), "Negative electrode thickness [m]": np.array([1.1e-4, 1.3e-4])}
+    batch = sim.simulate_batch(temi_params, request, values)
+    for k in range(2):
+        one = sim.simulate(temi_params.with_values({key: float(v[k]) for key, v in values.items()}), request)
+        assert batch.end_time_s[k] == pytest.approx(one.end_time_s, abs=1e-6)
+        n = one.time_s.size
+        np.testing.assert_allclose(batch.pack_voltage_v[k, :n], one.pack_voltage_v, rtol=0, atol=1e-9)
+    assert sim.extractions == 1
+
+
+def test_batch_refuses_a_value_that_needs_a_rebuild(temi_params):
+    from battery_predictor.simulation import SimulationRequest, StepLoad
+    from battery_predictor.simulation.engine.simulator import EngineSimulator
+
+    request = SimulationRequest(load=StepLoad.constant(3.0, 60.0))
+    with pytest.raises(SimulationError, match="Maximum concentration in positive electrode"):
+        EngineSimulator(fallback=None).simulate_batch(
+            temi_params, request, {"Maximum concentration in positive electrode [mol.m-3]": np.array([5e4, 6e4])})

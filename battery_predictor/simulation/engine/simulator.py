@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import time
 from collections import OrderedDict
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -29,11 +30,43 @@ from battery_predictor.simulation.cell_setup import prepared_parameter_values
 from battery_predictor.simulation.engine.modal import ModalSystem, modal_system
 from battery_predictor.simulation.engine.model import C_N0, C_P0, EPS_N, EPS_P, HEIGHT, LinearSpm, extract_linear_spm
 from battery_predictor.simulation.engine.pack import pack_voltage_v
-from battery_predictor.simulation.engine.run import ParameterSets, run_cells, voltages_at_times
+from battery_predictor.simulation.engine.run import CellRuns, ParameterSets, run_cells, voltages_at_times
 from battery_predictor.simulation.engine.state import StoichiometryWindow
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 LOG = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PackBatchResult:
+    """Many cells of one pack structure run on one load.
+
+    Attributes
+    ----------
+    time_s : numpy.ndarray
+        Step start times in s, shape (n_steps,).
+    cell_voltage_v : numpy.ndarray
+        Cell voltage (V) just after each step start, (n_sets, n_steps); NaN once a run has ended.
+    pack_voltage_v : numpy.ndarray
+        Pack voltage (V) at the same times (:func:`~battery_predictor.simulation.engine.pack.pack_voltage_v`
+        with the params' ``R_eq``).
+    end_time_s : numpy.ndarray
+        When each run ended (s).
+    reached_cutoff : numpy.ndarray
+        True where the cell reached its lower cut-off.
+    engine_seconds : float
+        Wall time of the engine run (s).
+    runs : CellRuns
+        The engine's own result.
+    """
+
+    time_s: np.ndarray
+    cell_voltage_v: np.ndarray
+    pack_voltage_v: np.ndarray
+    end_time_s: np.ndarray
+    reached_cutoff: np.ndarray
+    engine_seconds: float
+    runs: CellRuns
 
 #: Cell values a built extraction can take by scaling: PyBaMM key -> ParameterSets field.
 SCALABLE_KEYS = {
@@ -95,6 +128,74 @@ class EngineSimulator:
         if reason is not None:
             return self._fall_back(params, request, reason)
         return self._simulate(params, request, model, modal, sets, tic)
+
+    def simulate_batch(self, params, request: SimulationRequest, values: dict[str, np.ndarray]) -> PackBatchResult:
+        """Run many variants of ``params`` on ``request`` at once (no fallback: raises when not covered).
+
+        Parameters
+        ----------
+        params : PackParams
+            The pack; its values are the defaults of every set.
+        request : SimulationRequest
+            Load, temperature and initial state. The initial state of each set is its
+            ``values`` of the initial concentrations when given, else the request's SOC or open-circuit
+            voltage (a window per set: about 5 ms each), else the params' concentrations.
+        values : dict
+            PyBaMM key -> array of shape (n_sets,): any of :data:`SCALABLE_KEYS` and the initial
+            concentrations.
+
+        Returns
+        -------
+        PackBatchResult
+        """
+        reason = self.unsupported_reason(params, request)
+        if reason is not None:
+            raise SimulationError(f"engine: {reason}")
+        unknown = set(values) - set(SCALABLE_KEYS) - _STATE_KEYS
+        if unknown:
+            raise SimulationError(f"engine batch: cannot vary {', '.join(sorted(unknown))} without a rebuild")
+        model, modal, base = self._model(params)
+        n_sets = max((np.size(v) for v in values.values()), default=1)
+        factors = {field_name: getattr(base, field_name) for field_name in SCALABLE_KEYS.values()}
+        for key, arr in values.items():
+            if key in SCALABLE_KEYS:
+                factors[SCALABLE_KEYS[key]] = np.asarray(arr, dtype=float) / model.built_values[key]
+        c_n0, c_p0 = self._batch_concentrations(params, request, model, values, n_sets)
+        load = request.load
+        duration_s = np.diff(load.edges_s())
+        cell_current_a = load.current_a / params.parallel
+        tic = time.perf_counter()
+        runs = run_cells(model, modal, duration_s, cell_current_a, c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
+                         temperature_k=float(request.ambient_temperature_k or params.ambient_temperature_k),
+                         sets=ParameterSets(**factors), backend=self.backend)
+        engine_s = time.perf_counter() - tic
+        p = params.interconnect
+        r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
+                                                 p["r_t_ohm"])
+        v_pack = pack_voltage_v(runs.start_voltage_v, load.current_a[None, :], series=params.series, r_eq_ohm=r_eq)
+        return PackBatchResult(time_s=runs.step_start_s, cell_voltage_v=runs.start_voltage_v, pack_voltage_v=v_pack,
+                               end_time_s=runs.end_time_s, reached_cutoff=runs.reached_cutoff, engine_seconds=engine_s,
+                               runs=runs)
+
+    def _batch_concentrations(self, params, request: SimulationRequest, model: LinearSpm, values: dict,
+                              n_sets: int) -> tuple[np.ndarray, np.ndarray]:
+        if C_N0 in values or C_P0 in values:
+            pv = self._parameter_values(params)
+            return (np.broadcast_to(np.asarray(values.get(C_N0, pv[C_N0]), dtype=float), (n_sets,)),
+                    np.broadcast_to(np.asarray(values.get(C_P0, pv[C_P0]), dtype=float), (n_sets,)))
+        if request.initial_soc is None and request.initial_pack_ocv_v is None:
+            c_n, c_p = self._initial_concentrations(params, request, model)
+            return np.full(n_sets, c_n), np.full(n_sets, c_p)
+        pv = self._parameter_values(params)
+        out = np.empty((2, n_sets))
+        for k in range(n_sets):
+            set_pv = _Overlay(pv, {key: float(np.broadcast_to(arr, (n_sets,))[k]) for key, arr in values.items()})
+            window = StoichiometryWindow(model, set_pv)
+            if request.initial_soc is not None:
+                out[:, k] = window.concentrations(soc=float(request.initial_soc))
+            else:
+                out[:, k] = window.concentrations(ocv_v=float(request.initial_pack_ocv_v) / params.series)
+        return out[0], out[1]
 
     @staticmethod
     def unsupported_reason(params, request: SimulationRequest) -> str | None:
@@ -192,3 +293,14 @@ class EngineSimulator:
             seconds=time.perf_counter() - tic,
             extra={"r_eq_ohm": r_eq, "engine_seconds": engine_s, "engine_backend": runs.extra["backend"]},
         )
+
+
+class _Overlay:
+    """Parameter values with some keys replaced (read-only)."""
+
+    def __init__(self, base, overrides: dict[str, float]) -> None:
+        self._base = base
+        self._overrides = overrides
+
+    def __getitem__(self, key: str):
+        return self._overrides[key] if key in self._overrides else self._base[key]
