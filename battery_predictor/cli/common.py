@@ -6,6 +6,7 @@ import contextlib
 import json
 import math
 import os
+import shutil
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -171,8 +172,10 @@ def progress_bar(total: float, desc: str, unit: str, *, enabled: bool, stream: T
         return
     from tqdm import tqdm
 
+    # shutil falls back to 80 x 24 where the terminal reports 0 x 0 (tqdm would then draw nothing)
+    size = shutil.get_terminal_size()
     bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr if stream is None else stream, delay=delay_s,
-               dynamic_ncols=True, leave=False)
+               ncols=size.columns, nrows=size.lines, leave=False)
 
     def update(done: float) -> None:
         bar.n = min(done, total)
