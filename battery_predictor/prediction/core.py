@@ -219,7 +219,8 @@ class PredictorCore:
             if previous is not None and self._is_jump(previous, self._state):
                 self._history.clear()
                 self._new_state(stamp_s, f"voltage jumped {previous[1]:.2f} -> {voltage_v:.2f} V at "
-                                         f"{previous[2]:.2f} -> {current_a:.2f} A (battery swap?)")
+                                         f"{previous[2]:.2f} -> {current_a:.2f} A, more than the current explains "
+                                         "(battery swap, sensor, or the end-of-discharge knee): calibrating afresh")
             self._history.append(self._state)
             horizon = max(self.config.calibration_window_s, self.config.recalibrate_after_s, 60.0) + 300.0
             while self._history and self._history[0][0] < stamp_s - horizon:
