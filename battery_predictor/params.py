@@ -239,7 +239,7 @@ class PackParams:
 
     # ------------------------------------------------------------------ output
     def to_dict(self) -> dict[str, Any]:
-        """The params as a YAML-ready dict (same layout as the files in ``params/``)."""
+        """The params as a YAML-ready dict (same layout as the files in ``params/``; provenance paths relative)."""
         out: dict[str, Any] = {
             "name": self.name,
             "description": self.description,
@@ -262,7 +262,9 @@ class PackParams:
         if self.fit.bounds:
             out["fit"]["bounds"] = {k: [float(lo), float(hi)] for k, (lo, hi) in self.fit.bounds.items()}
         if self.provenance:
-            out["provenance"] = copy.deepcopy(self.provenance)
+            from battery_predictor.io.paths import portable_paths
+
+            out["provenance"] = portable_paths(copy.deepcopy(self.provenance))
         return out
 
     def to_yaml(self, path: str | Path) -> Path:

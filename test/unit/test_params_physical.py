@@ -81,3 +81,11 @@ def test_predictor_threshold_outside_the_pack_window_is_rejected(tmp_path):
     path.write_text(yaml.safe_dump(nodes))
     with pytest.raises(ParamsError, match="predictor.cutoff_voltage_v"):
         check_node_params_file(str(path))
+
+
+def test_written_params_keep_provenance_paths_relative(tmp_path):
+    temi = load_params(REPO / "params" / "temi.yaml")
+    data = [str(REPO / "bags" / "temi_dynamic_pack1")]
+    fitted = temi.with_values({}, provenance={"data": data, "storage": f"sqlite:///{REPO / 'fit.optuna.db'}"})
+    back = load_params(fitted.to_yaml(tmp_path / "fit.yaml"))
+    assert back.provenance == {"data": ["bags/temi_dynamic_pack1"], "storage": "sqlite:///fit.optuna.db"}
