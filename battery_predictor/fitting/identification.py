@@ -36,6 +36,9 @@ DEFAULT_STARTS = 3
 #: A refinement may always spend this many Jacobians' worth of evaluations (convergence from a
 #: TPE candidate took 100-185 evaluations on 5 coordinates), even when later starts then get less.
 MIN_REFINE_JACOBIANS = 25
+#: Budget left after the planned starts goes to further distinct candidates while it buys at least
+#: this many Jacobians.
+MIN_LEFTOVER_JACOBIANS = 3
 #: Two TPE candidates are distinct when they differ by this much (max-norm on the unit cube).
 DISTINCT_UNIT_DISTANCE = 0.25
 #: Finite-difference step on the unit cube.
@@ -244,7 +247,7 @@ class IdentificationResult:
     tpe_evaluations : int
         Of which in TPE.
     starts : int
-        Refinements started.
+        Refinements run.
     seconds : float
         Wall time in s.
     history : list of tuple
@@ -375,7 +378,8 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 400, seed: in
     tpe_fraction : float
         Share of the budget for TPE (0 = refinement from the start point only).
     starts : int
-        Refinements from the best distinct TPE candidates (the start point counts as a candidate).
+        Refinements planned from the best distinct TPE candidates (the start point counts as a
+        candidate); budget they leave unspent refines further distinct candidates.
     startup_per_coordinate : int
         Random TPE start-up trials per coordinate (capped at 30 % of the TPE trials).
     progress : callable, optional
@@ -405,19 +409,22 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 400, seed: in
         candidates = [(float(r @ r), start)]
     tpe_count = log.count
     note("tpe")
-    picked = distinct_best(candidates, max(1, starts))
+    picked = distinct_best(candidates, len(candidates))
+    jacobian_cost = len(problem.space) + 1
+    refined = 0
     for k, unit in enumerate(picked):
         remaining = evaluations - log.count
-        if remaining <= 0:
+        if remaining < MIN_LEFTOVER_JACOBIANS * jacobian_cost or (k >= starts and remaining <= 0):
             break
-        log.budget = log.count + min(remaining, max(remaining // (len(picked) - k),
-                                                     MIN_REFINE_JACOBIANS * (len(problem.space) + 1)))
+        planned_left = max(max(1, starts) - k, 1)
+        log.budget = log.count + min(remaining, max(remaining // planned_left, MIN_REFINE_JACOBIANS * jacobian_cost))
         reached = _refine(residual, unit, max_evaluations=log.budget - log.count)
         log.budget = evaluations
+        refined += 1
         note(f"refine {k + 1} (reached {reached:.4g})")
     best = log.best_unit if log.best_unit is not None else start
     return IdentificationResult(coordinates=problem.coordinates(best), unit=best, cost=log.best_cost,
-                                evaluations=log.count, tpe_evaluations=tpe_count, starts=len(picked),
+                                evaluations=log.count, tpe_evaluations=tpe_count, starts=refined,
                                 seconds=time.perf_counter() - tic, history=history)
 
 
