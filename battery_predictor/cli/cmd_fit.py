@@ -69,6 +69,7 @@ def run(args) -> int:
         return run_identify(args)
     if args.trials is None:
         args.trials = 1000
+    from battery_predictor.fitting.identification import raw_identifiability
     from battery_predictor.fitting.optimiser import TPEOptimiser
     from battery_predictor.fitting.problem import FitProblem
     from battery_predictor.fitting.resample import resample_all
@@ -91,6 +92,7 @@ def run(args) -> int:
                              workers=args.workers, progress=not args.no_progress)
     result = optimiser.run(problem, space)
     best = problem.evaluate(result.best_values)
+    report = raw_identifiability(problem, space, result.best_values)
     fitted = params.with_values(result.best_values, provenance={
         "fitted_by": "battery-predictor fit (Optuna TPE, R2_mod of the seed paper Eq. 1-3)",
         "fitted_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
@@ -105,19 +107,22 @@ def run(args) -> int:
         "study": result.study_name,
         "storage": result.storage,
         "started_from": str(args.params),
+        "identifiability": report.to_dict(),
     }, fit=params.fit)
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")
     if args.json:
-        print_json({"r2_mod": best.r2_mod, "trials": result.trials, "failed_trials": result.failed_trials,
-                    "seconds": result.seconds, "params": result.best_values, "out": str(out),
-                    "plot": str(plot_path)})
+        print_json({"method": "tpe", "r2_mod": best.r2_mod, "trials": result.trials,
+                    "failed_trials": result.failed_trials, "seconds": result.seconds, "params": result.best_values,
+                    "identifiability": report.to_dict(), "out": str(out), "plot": str(plot_path)})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
           f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s)")
     for space_p in space:
         v = result.best_values[space_p.name]
         print(f"  {space_p.name:<58} {space_p.initial:>12.5g} -> {v:>12.5g}")
+    for line in report.summary_lines():
+        print(line)
     print(f"wrote {out} and {plot_path}")
     return 0

@@ -437,7 +437,7 @@ def jacobian_at(problem: IdentificationProblem, unit: np.ndarray, step: float = 
 
 
 __all__ = ["IdentificationProblem", "IdentificationResult", "identify", "identifiability_of", "jacobian_at",
-           "startup_trials",
+           "raw_identifiability", "startup_trials",
            "distinct_best", "ResidualGrid", "CandidateScore"]
 
 
@@ -450,3 +450,34 @@ def identifiability_of(problem: IdentificationProblem, unit: np.ndarray):
     coords = problem.coordinates(unit)
     return analyse(problem.names, [coords[n] for n in problem.names], [c.log for c in problem.space], residuals,
                    theta_jacobian(jac_unit, spans), [(c.low, c.high) for c in problem.space])
+
+
+def raw_identifiability(problem, space, values: dict[str, float], relative_step: float = 1e-3):
+    """Identifiability of the raw parameters of the paper's fit (``fit --method tpe``) at ``values``.
+
+    ``theta = ln(value)`` for every parameter (intervals are relative), with forward differences of
+    ``relative_step`` in ``theta``; residuals as in :class:`ResidualGrid`. Costs ``n + 1``
+    evaluations of the :class:`~battery_predictor.fitting.problem.FitProblem`.
+    """
+    from battery_predictor.fitting.identifiability import analyse
+
+    n_rec = len(problem.recordings)
+    grids = [ResidualGrid.for_recording(r, problem.extend_fraction * r.duration_s, n_rec) for r in problem.recordings]
+
+    def residuals(vals: dict[str, float]) -> np.ndarray:
+        try:
+            results = problem.evaluate(vals).results
+        except SimulationError:
+            results = [None] * n_rec
+        return np.concatenate([g.residuals(r) for g, r in zip(grids, results, strict=True)])
+
+    names = [p.name for p in space]
+    base = {n: float(values[n]) for n in names}
+    r0 = residuals(base)
+    jac = np.empty((r0.size, len(names)))
+    for i, name in enumerate(names):
+        shifted = dict(base)
+        shifted[name] = base[name] * math.exp(relative_step)
+        jac[:, i] = (residuals(shifted) - r0) / relative_step
+    return analyse(names, [base[n] for n in names], [True] * len(names), r0, jac,
+                   [(p.low, p.high) for p in space])

@@ -65,7 +65,11 @@ def test_trials_without_method_keeps_the_papers_tpe(one_second_csv, tmp_path):
                 "--trials", "2", "--out", str(tmp_path / "tpe.yaml"), "--json", "--no-progress")
     assert proc.returncode == 0, proc.stderr
     obj = json.loads(proc.stdout)
-    assert obj["trials"] == 2 and "identifiability" not in obj
+    assert obj["method"] == "tpe" and obj["trials"] == 2
+    # the paper's raw parameters: thickness and active fraction of an electrode compensate each other
+    pairs = {frozenset((p["a"], p["b"])) for p in obj["identifiability"]["correlated_pairs"]}
+    assert frozenset(("Negative electrode thickness [m]",
+                      "Negative electrode active material volume fraction")) in pairs
 
 
 @pytest.mark.parametrize("window", ["0", "-5", "nan"])
