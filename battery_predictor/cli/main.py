@@ -22,7 +22,6 @@ COMMAND_MODULES = (
     "battery_predictor.cli.cmd_replay",
     "battery_predictor.cli.cmd_evaluate",
     "battery_predictor.cli.cmd_evaluate_runtime",
-    "battery_predictor.cli.cmd_evaluate_runtime",
     "battery_predictor.cli.cmd_diagnose",
     "battery_predictor.cli.cmd_demo",
 )
