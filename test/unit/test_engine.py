@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -151,6 +153,8 @@ def test_batched_sets_equal_single_runs(temi_spm):
     ({"Negative electrode thickness [m]": 1.15, "Positive electrode active material volume fraction": 0.9,
       "Electrode height [m]": 1.1, "Positive particle radius [m]": 1.2},
      {"thickness_n": 1.15, "fraction_p": 0.9, "height": 1.1, "radius_p": 1.2}),
+    ({"Maximum concentration in negative electrode [mol.m-3]": 1.1,
+      "Maximum concentration in positive electrode [mol.m-3]": 0.93}, {"c_max_n": 1.1, "c_max_p": 0.93}),
 ])
 def test_parameter_set_factors_match_a_pybamm_rebuild(temi_params, temi_spm, changes, factors):
     model, modal = temi_spm
@@ -304,6 +308,29 @@ def test_batch_refuses_a_value_that_needs_a_rebuild(temi_params):
     from battery_predictor.simulation.engine.simulator import EngineSimulator
 
     request = SimulationRequest(load=StepLoad.constant(3.0, 60.0))
-    with pytest.raises(SimulationError, match="Maximum concentration in positive electrode"):
-        EngineSimulator(fallback=None).simulate_batch(
-            temi_params, request, {"Maximum concentration in positive electrode [mol.m-3]": np.array([5e4, 6e4])})
+    with pytest.raises(SimulationError, match="Electrode width"):
+        EngineSimulator(fallback=None).simulate_batch(temi_params, request, {"Electrode width [m]": np.array([0.05, 0.06])})
+
+
+@pytest.mark.parametrize("name", ["temi", "ranger_mini"])
+def test_maximum_concentration_rule_holds_for_the_shipped_packs(name):
+    from battery_predictor.params import load_params
+    from battery_predictor.simulation.engine.model import c_max_scaling_holds
+
+    assert c_max_scaling_holds(load_params(Path(__file__).resolve().parents[2] / "params" / f"{name}.yaml"))
+
+
+def test_simulator_scales_a_maximum_concentration_without_a_new_extraction(temi_params):
+    from battery_predictor.simulation import SimulationRequest, StepLoad
+    from battery_predictor.simulation.engine.simulator import EngineSimulator
+
+    request = SimulationRequest(load=StepLoad.constant(6.0, 1800.0), initial_soc=0.4, output_time_s=np.arange(0, 1800, 60.0))
+    sim = EngineSimulator(fallback=None)
+    sim.simulate(temi_params, request)
+    changed = temi_params.with_values({"Maximum concentration in positive electrode [mol.m-3]": 80000.0})
+    scaled = sim.simulate(changed, request)
+    direct = EngineSimulator(fallback=None, cache_size=1)
+    direct._c_max_rule[(changed.base_parameter_set, changed.model, "[]", changed.extensions)] = False
+    rebuilt = direct.simulate(changed, request)
+    assert sim.extractions == 1
+    np.testing.assert_allclose(scaled.pack_voltage_v, rebuilt.pack_voltage_v, rtol=0, atol=1e-8)

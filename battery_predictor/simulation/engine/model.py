@@ -5,7 +5,7 @@ default 20 cells) is, in its own state vector ``y`` (concentrations divided by t
 
 * two decoupled linear blocks, one per electrode: ``dy_e/dt = A_e y_e + b_e I`` with the cell
   current ``I`` (A) as input;
-* a surface value per electrode, ``s_e = m_e . y_e`` (PyBaMM's extrapolation row);
+* a surface stoichiometry per electrode, ``s_e = m_e . y_e`` (PyBaMM's extrapolation row);
 * a terminal voltage that depends on the state only through ``s_n``, ``s_p`` (open-circuit
   potentials, Butler-Volmer overpotentials and whatever else the built expression holds).
 
@@ -22,7 +22,11 @@ rebuilds in the tests): on PyBaMM's uniform ``r`` mesh from 0 to the particle ra
 ``A_e`` scales with ``D / R**2``; ``b_e`` with ``1 / (eps L H)`` (active fraction, thickness,
 electrode height); the surface row is scale-free; the voltage sees ``R``, ``L`` and ``eps`` only
 through the reaction area ``3 eps L / R``, so a set is evaluated with the equivalent volume
-fraction ``eps L R_0 / (L_0 R)``.
+fraction ``eps L R_0 / (L_0 R)``. A maximum concentration ``c_max`` scales ``b_e`` with
+``1 / c_max`` (the state is the stoichiometry) and, where the exchange-current density is
+homogeneous of degree one in the surface and maximum concentrations (as in the parameter sets
+shipped with PyBaMM that the project uses), the voltage's current density with ``1 / c_max``:
+:func:`c_max_scaling_holds` checks that rule on a PyBaMM rebuild before it is used.
 """
 
 from __future__ import annotations
@@ -43,6 +47,8 @@ T_INIT = "Initial temperature [K]"
 EPS_N = "Negative electrode active material volume fraction"
 EPS_P = "Positive electrode active material volume fraction"
 HEIGHT = "Electrode height [m]"
+C_MAX_N = "Maximum concentration in negative electrode [mol.m-3]"
+C_MAX_P = "Maximum concentration in positive electrode [mol.m-3]"
 #: PyBaMM keys that become ``[input]`` parameters of the extracted model.
 INPUT_KEYS = (CURRENT, C_N0, C_P0, T_AMB, T_INIT, EPS_N, EPS_P, HEIGHT)
 #: Rows of the voltage function's input array, in order.
@@ -116,8 +122,9 @@ class LinearSpm:
                        temperature_k, eps_n=None, eps_p=None, height_m=None) -> np.ndarray:
         """Terminal voltage (V) of the cell at surface states and cell currents (A), elementwise.
 
-        ``surface_*`` are PyBaMM's scaled surface values (``m . y``). The optional values default
-        to the built cell's and broadcast against the surface arrays.
+        ``surface_*`` are surface stoichiometries (PyBaMM's state is the concentration over its
+        maximum). The optional values default to the built cell's and broadcast against the
+        surface arrays.
         """
         surface_n = np.asarray(surface_n, dtype=float)
         shape = np.broadcast_shapes(surface_n.shape, np.shape(surface_p), np.shape(current_a))
@@ -154,7 +161,7 @@ def _built_simulation(params):
     if params.model != "SPM":
         raise SimulationError(f"{params.source}: the engine handles the SPM, not the {params.model}")
     pv = prepared_parameter_values(params)
-    built = {key: float(pv[key]) for key in (C_N0, C_P0, T_AMB, EPS_N, EPS_P, HEIGHT)}
+    built = {key: float(pv[key]) for key in (C_N0, C_P0, T_AMB, EPS_N, EPS_P, HEIGHT, C_MAX_N, C_MAX_P)}
     for electrode in ("Negative", "Positive"):
         for key in (f"{electrode} particle radius [m]", f"{electrode} particle diffusivity [m2.s-1]",
                     f"{electrode} electrode thickness [m]"):
@@ -300,3 +307,35 @@ def _check_surface(surface, sl: slice, row_mol_m3: np.ndarray, n_states: int, in
     want[sl] = row_mol_m3
     if np.abs(unit).max() > 0.0 or not np.allclose(jac.ravel(), want, rtol=1e-12, atol=1e-9):
         raise SimulationError(f"the {electrode} surface concentration is not the voltage's surface row")
+
+
+#: Relative change of the maximum concentrations in the check of their scaling rule.
+_C_MAX_CHECK_FACTORS = (1.13, 0.91)
+
+
+def c_max_scaling_holds(params) -> bool:
+    """True when changing ``params``' maximum concentrations is the scaling of the module docstring.
+
+    Compares a PyBaMM rebuild with changed maximum concentrations against the scaled extraction:
+    the particle input vectors and the voltage at several stoichiometries and currents. Returns
+    False (maximum concentrations then need a rebuild) when the model cannot be extracted either.
+    """
+    keys = (C_MAX_N, C_MAX_P)
+    try:
+        base = extract_linear_spm(params)
+        pv = params.parameter_values()
+        changed = extract_linear_spm(params.with_values({k: float(pv[k]) * f for k, f in zip(keys, _C_MAX_CHECK_FACTORS)}))
+    except SimulationError:
+        return False
+    for blk, other, f in zip(base.blocks, changed.blocks, _C_MAX_CHECK_FACTORS):
+        if not np.allclose(other.b_vector_per_a_s, blk.b_vector_per_a_s / f, rtol=1e-10, atol=0.0):
+            return False
+        if not np.allclose(other.a_matrix_per_s, blk.a_matrix_per_s, rtol=1e-10, atol=0.0):
+            return False
+    grid = np.linspace(0.05, 0.95, 7)
+    s_n, s_p, current = np.meshgrid(grid, grid[::-1], np.array([-3.0, 0.5, 4.0]))
+    t_k = base.built_values[T_AMB]
+    want = changed.cell_voltage_v(s_n, s_p, current, t_k)
+    got = base.cell_voltage_v(s_n, s_p, current, t_k, eps_n=base.built_values[EPS_N] * _C_MAX_CHECK_FACTORS[0],
+                              eps_p=base.built_values[EPS_P] * _C_MAX_CHECK_FACTORS[1])
+    return bool(np.allclose(got, want, rtol=0.0, atol=1e-10))

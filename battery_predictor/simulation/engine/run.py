@@ -54,6 +54,8 @@ class ParameterSets:
     fraction_n: object = 1.0
     fraction_p: object = 1.0
     height: object = 1.0
+    c_max_n: object = 1.0
+    c_max_p: object = 1.0
 
     def size(self) -> int:
         """Number of sets (1 when every factor is a scalar)."""
@@ -119,14 +121,14 @@ def _batch(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: in
     f = sets.arrays(n_sets)
     a_n = f["diffusivity_n"] / f["radius_n"] ** 2
     a_p = f["diffusivity_p"] / f["radius_p"] ** 2
-    b_n = 1.0 / (f["fraction_n"] * f["thickness_n"] * f["height"])
-    b_p = 1.0 / (f["fraction_p"] * f["thickness_p"] * f["height"])
+    b_n = 1.0 / (f["fraction_n"] * f["thickness_n"] * f["height"] * f["c_max_n"])
+    b_p = 1.0 / (f["fraction_p"] * f["thickness_p"] * f["height"] * f["c_max_p"])
     built = model.built_values
     return _Batch(
         lam=modal.eigenvalues_per_s[None, :] * modal.electrode_factors(a_n, a_p),
         drive=modal.input_per_a_s[None, :] * modal.electrode_factors(b_n, b_p),
-        eps_n=built[EPS_N] * f["fraction_n"] * f["thickness_n"] / f["radius_n"],
-        eps_p=built[EPS_P] * f["fraction_p"] * f["thickness_p"] / f["radius_p"],
+        eps_n=built[EPS_N] * f["fraction_n"] * f["thickness_n"] * f["c_max_n"] / f["radius_n"],
+        eps_p=built[EPS_P] * f["fraction_p"] * f["thickness_p"] * f["c_max_p"] / f["radius_p"],
         height_m=built[HEIGHT] * f["height"],
         temperature_k=np.broadcast_to(np.asarray(temperature_k, dtype=float), (n_sets,)),
     )
@@ -180,8 +182,10 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
     batch = _batch(model, modal, sets, n_sets, temperature_k)
     c_n0 = np.broadcast_to(np.asarray(c_n0_mol_m3, dtype=float), (n_sets,))
     c_p0 = np.broadcast_to(np.asarray(c_p0_mol_m3, dtype=float), (n_sets,))
-    y_n = np.outer(c_n0 / model.blocks[0].scale_mol_m3, np.ones(model.blocks[0].b_vector_per_a_s.size))
-    y_p = np.outer(c_p0 / model.blocks[1].scale_mol_m3, np.ones(model.blocks[1].b_vector_per_a_s.size))
+    c_max_n = model.blocks[0].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_n, dtype=float), (n_sets,))
+    c_max_p = model.blocks[1].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_p, dtype=float), (n_sets,))
+    y_n = np.outer(c_n0 / c_max_n, np.ones(model.blocks[0].b_vector_per_a_s.size))
+    y_p = np.outer(c_p0 / c_max_p, np.ones(model.blocks[1].b_vector_per_a_s.size))
     z0 = modal.modal_state(y_n, y_p)
     edges = np.concatenate([[0.0], np.cumsum(duration_s)])
     kernel = None if keep_states or backend == "numpy" else fused_kernel(model, parallel=n_sets >= PARALLEL_MIN_SETS)

@@ -28,7 +28,18 @@ from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.base import PackSimResult, SimulationRequest
 from battery_predictor.simulation.cell_setup import prepared_parameter_values
 from battery_predictor.simulation.engine.modal import ModalSystem, modal_system
-from battery_predictor.simulation.engine.model import C_N0, C_P0, EPS_N, EPS_P, HEIGHT, LinearSpm, extract_linear_spm
+from battery_predictor.simulation.engine.model import (
+    C_MAX_N,
+    C_MAX_P,
+    C_N0,
+    C_P0,
+    EPS_N,
+    EPS_P,
+    HEIGHT,
+    LinearSpm,
+    c_max_scaling_holds,
+    extract_linear_spm,
+)
 from battery_predictor.simulation.engine.pack import pack_voltage_v
 from battery_predictor.simulation.engine.run import CellRuns, ParameterSets, run_cells, voltages_at_times
 from battery_predictor.simulation.engine.state import StoichiometryWindow
@@ -80,6 +91,8 @@ SCALABLE_KEYS = {
     EPS_P: "fraction_p",
     HEIGHT: "height",
 }
+#: The maximum concentrations, scalable where :func:`c_max_scaling_holds`.
+C_MAX_KEYS = {C_MAX_N: "c_max_n", C_MAX_P: "c_max_p"}
 _STATE_KEYS = frozenset({C_N0, C_P0})
 #: Extensions whose whole effect is inside PyBaMM's cell model (model options, parameter values) or
 #: outside the simulator (the current offset is applied where a recording becomes a load); the
@@ -113,6 +126,7 @@ class EngineSimulator:
         self.cache_size = cache_size
         self._cache: OrderedDict[tuple, tuple[LinearSpm, ModalSystem]] = OrderedDict()
         self._values: dict[tuple, object] = {}
+        self._c_max_rule: dict[tuple, bool] = {}
         self.extractions = 0
 
     # ----------------------------------------------------------------- public
@@ -151,15 +165,9 @@ class EngineSimulator:
         reason = self.unsupported_reason(params, request)
         if reason is not None:
             raise SimulationError(f"engine: {reason}")
-        unknown = set(values) - set(SCALABLE_KEYS) - _STATE_KEYS
-        if unknown:
-            raise SimulationError(f"engine batch: cannot vary {', '.join(sorted(unknown))} without a rebuild")
         model, modal, base = self._model(params)
         n_sets = max((np.size(v) for v in values.values()), default=1)
-        factors = {field_name: getattr(base, field_name) for field_name in SCALABLE_KEYS.values()}
-        for key, arr in values.items():
-            if key in SCALABLE_KEYS:
-                factors[SCALABLE_KEYS[key]] = np.asarray(arr, dtype=float) / model.built_values[key]
+        factors = self._batch_factors(params, model, base, values)
         c_n0, c_p0 = self._batch_concentrations(params, request, model, values, n_sets)
         load = request.load
         duration_s = np.diff(load.edges_s())
@@ -218,10 +226,18 @@ class EngineSimulator:
         result.extra["engine_fallback"] = f"{self.fallback.name}: {reason}"
         return result
 
+    def _scalable_keys(self, params) -> dict[str, str]:
+        """:data:`SCALABLE_KEYS`, plus the maximum concentrations where this model structure obeys their rule."""
+        structure = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions)
+        if structure not in self._c_max_rule:
+            self._c_max_rule[structure] = c_max_scaling_holds(params)
+        return {**SCALABLE_KEYS, **C_MAX_KEYS} if self._c_max_rule[structure] else SCALABLE_KEYS
+
     def _model(self, params) -> tuple[LinearSpm, ModalSystem, ParameterSets]:
         """The extraction for ``params`` (cached on everything but scalable values) and its scale factors."""
         values = params.cell_values
-        fixed = tuple(sorted((k, repr(v)) for k, v in values.items() if k not in SCALABLE_KEYS and k not in _STATE_KEYS))
+        scalable = self._scalable_keys(params)
+        fixed = tuple(sorted((k, repr(v)) for k, v in values.items() if k not in scalable and k not in _STATE_KEYS))
         key = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions, fixed)
         if key in self._cache:
             self._cache.move_to_end(key)
@@ -235,12 +251,23 @@ class EngineSimulator:
                 self._cache.popitem(last=False)
         pv = self._parameter_values(params)
         factors = {}
-        for pybamm_key, field_name in SCALABLE_KEYS.items():
+        for pybamm_key, field_name in scalable.items():
             value = pv[pybamm_key]
             if not isinstance(value, (int, float)):
                 raise SimulationError(f"'{pybamm_key}' is not a constant; the engine needs a constant")
             factors[field_name] = float(value) / model.built_values[pybamm_key]
         return model, modal, ParameterSets(**factors)
+
+    def _batch_factors(self, params, model: LinearSpm, base: ParameterSets, values: dict) -> dict:
+        scalable = self._scalable_keys(params)
+        unknown = set(values) - set(scalable) - _STATE_KEYS
+        if unknown:
+            raise SimulationError(f"engine batch: cannot vary {', '.join(sorted(unknown))} without a rebuild")
+        factors = dict(vars(base))
+        for key, arr in values.items():
+            if key in scalable:
+                factors[scalable[key]] = np.asarray(arr, dtype=float) / model.built_values[key]
+        return factors
 
     def _initial_concentrations(self, params, request: SimulationRequest, model: LinearSpm) -> tuple[float, float]:
         """(c_n, c_p) in mol/m3 for the request's SOC or pack open-circuit voltage, else the params' own."""

@@ -66,11 +66,8 @@ class StoichiometryWindow:
 
     def ocv_v(self, x) -> np.ndarray:
         """Open-circuit voltage (V) at negative stoichiometry ``x`` (PyBaMM's voltage at zero current)."""
-        x = np.asarray(x, dtype=float)
-        scale_n, scale_p = (blk.scale_mol_m3 for blk in self.model.blocks)
-        return self.model.cell_voltage_v(x * self.c_max_mol_m3[0] / scale_n,
-                                         self.y_of(x) * self.c_max_mol_m3[1] / scale_p, 0.0,
-                                         self.reference_temperature_k)
+        x = np.asarray(x, dtype=float)  # the engine's surface values are stoichiometries
+        return self.model.cell_voltage_v(x, self.y_of(x), 0.0, self.reference_temperature_k)
 
     def x_at_ocv(self, ocv_v: float) -> float:
         """Negative stoichiometry whose open-circuit voltage is ``ocv_v`` (grid, then zoomed grids)."""
