@@ -309,7 +309,8 @@ def test_batch_refuses_a_value_that_needs_a_rebuild(temi_params):
 
     request = SimulationRequest(load=StepLoad.constant(3.0, 60.0))
     with pytest.raises(SimulationError, match="Electrode width"):
-        EngineSimulator(fallback=None).simulate_batch(temi_params, request, {"Electrode width [m]": np.array([0.05, 0.06])})
+        EngineSimulator(fallback=None).simulate_batch(temi_params, request,
+                                                      {"Electrode width [m]": np.array([0.05, 0.06])})
 
 
 @pytest.mark.parametrize("name", ["temi", "ranger_mini"])
@@ -324,7 +325,8 @@ def test_simulator_scales_a_maximum_concentration_without_a_new_extraction(temi_
     from battery_predictor.simulation import SimulationRequest, StepLoad
     from battery_predictor.simulation.engine.simulator import EngineSimulator
 
-    request = SimulationRequest(load=StepLoad.constant(6.0, 1800.0), initial_soc=0.4, output_time_s=np.arange(0, 1800, 60.0))
+    request = SimulationRequest(load=StepLoad.constant(6.0, 1800.0), initial_soc=0.4,
+                                output_time_s=np.arange(0, 1800, 60.0))
     sim = EngineSimulator(fallback=None)
     sim.simulate(temi_params, request)
     changed = temi_params.with_values({"Maximum concentration in positive electrode [mol.m-3]": 80000.0})

@@ -174,7 +174,8 @@ def _compile(numba):
         return _KERNEL_CACHE["kernel"]
 
     @numba.njit(cache=True, fastmath=False)
-    def kernel(lam, drive, z0, duration_s, current_a, weights, stride, surfaces, checkpoints, z_end):  # pragma: no cover
+    def kernel(lam, drive, z0, duration_s, current_a, weights, stride, surfaces, checkpoints,
+               z_end):  # pragma: no cover - compiled
         n_sets, n_modes = z0.shape
         n_steps = duration_s.shape[0]
         decay = np.empty(n_modes)

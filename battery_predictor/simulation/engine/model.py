@@ -324,7 +324,8 @@ def c_max_scaling_holds(params) -> bool:
     try:
         base = extract_linear_spm(params)
         pv = params.parameter_values()
-        changed = extract_linear_spm(params.with_values({k: float(pv[k]) * f for k, f in zip(keys, _C_MAX_CHECK_FACTORS)}))
+        changed_values = {k: float(pv[k]) * f for k, f in zip(keys, _C_MAX_CHECK_FACTORS)}
+        changed = extract_linear_spm(params.with_values(changed_values))
     except SimulationError:
         return False
     for blk, other, f in zip(base.blocks, changed.blocks, _C_MAX_CHECK_FACTORS):

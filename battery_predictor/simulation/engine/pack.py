@@ -38,7 +38,8 @@ def series_resistance_factor(temperature_k, activation_energy_j_mol: float,
     temperature_k = np.asarray(temperature_k, dtype=float)
     if activation_energy_j_mol == 0.0:
         return np.ones_like(temperature_k)
-    return np.exp(activation_energy_j_mol / GAS_CONSTANT_J_MOL_K * (1.0 / temperature_k - 1.0 / reference_temperature_k))
+    inverse_k = 1.0 / temperature_k - 1.0 / reference_temperature_k
+    return np.exp(activation_energy_j_mol / GAS_CONSTANT_J_MOL_K * inverse_k)
 
 
 def pack_voltage_v(cell_voltage_v, pack_current_a, *, series: int, r_eq_ohm, weak_cell_voltage_v=None) -> np.ndarray:
