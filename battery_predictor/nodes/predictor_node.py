@@ -40,16 +40,17 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.errors import BatteryPredictorError, ParamsError
 from battery_predictor.nodes._params import (
     declare_bool,
     declare_float,
     declare_str,
+    reject_undeclared,
     resolve_params_file,
-    undeclared_overrides,
 )
 from battery_predictor.nodes._sync import TimerProbe
 from battery_predictor.nodes.messages import fill_route_response, remaining_runtime_msg, route_sections, stamp_to_s
+from battery_predictor.params_checks import check_node_voltages
 from battery_predictor.prediction.core import (
     PEAK_SOURCES,
     STATUS_MODEL_FAILED,
@@ -95,10 +96,15 @@ class PredictorNode(Node):
     def __init__(self, node_name: str = "predictor", *, core: PredictorCore | None = None, **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         self.config, topics, runtime_period_s = self._declare_parameters()
-        for name in undeclared_overrides(self):
-            self.get_logger().warning(f"parameter '{name}' is set but not used by this node (typo?)")
+        reject_undeclared(self)
         t0 = time.perf_counter()
         self.core = core if core is not None else PredictorCore(self.config)
+        if core is None and self.core.runner is None:
+            raise ParamsError(f"{self.get_name()}: no usable pack model: {self.core.model_error}")
+        if self.core.params is not None:
+            check_node_voltages(f"parameters of node '{self.get_name()}'", self.core.params,
+                                {"cutoff_voltage_v": self.config.cutoff_voltage_v,
+                                 "route_min_voltage_v": self.config.route_min_voltage_v})
         # Optionally the service gets a pack model of its own so a route answer never waits for a runtime
         # update (each model solves one simulation at a time). A given core serves both, and so does the
         # runtime's when routes need no model (no route threshold, or no model at all).

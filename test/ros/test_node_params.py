@@ -86,15 +86,18 @@ def test_out_of_range_parameter_is_refused(ros_context: Context) -> None:
         BatteryMonitorNode(context=ros_context, parameter_overrides=[Parameter("input_style", value="can_bus")])
 
 
-def test_missing_pack_params_make_every_answer_a_reasoned_refusal(ros_context: Context) -> None:
-    node = PredictorNode(context=ros_context, parameter_overrides=[Parameter("params_file", value="/nonexistent.yaml")])
-    try:
-        status = node.runtime_status(0.0)
-        assert not status.valid and "no usable pack model" in status.reason
-        decision = node.decide_route(CanAcceptRoute.Request(sections=route_section_msgs(longest_route(20).sections)))
-        assert not decision.accepted and decision.reason
-    finally:
-        node.destroy_node()
+def test_missing_pack_params_stop_the_node_with_one_line(ros_context: Context) -> None:
+    with pytest.raises(ParamsError, match="no usable pack model: .*nonexistent.yaml"):
+        PredictorNode(context=ros_context, parameter_overrides=[Parameter("params_file", value="/nonexistent.yaml")])
+
+
+def test_misspelled_parameter_or_a_cutoff_outside_the_pack_stop_the_predictor(ros_context: Context) -> None:
+    with pytest.raises(ParamsError, match="did you mean 'cutoff_voltage_v'"):
+        PredictorNode(context=ros_context, parameter_overrides=[Parameter("params_file", value="temi.yaml"),
+                                                                Parameter("cutoff_voltag_v", value=13.3)])
+    with pytest.raises(ParamsError, match="cutoff_voltage_v"):
+        PredictorNode(context=ros_context, parameter_overrides=[Parameter("params_file", value="temi.yaml"),
+                                                                Parameter("cutoff_voltage_v", value=133.0)])
 
 
 def test_run_arguments_check_the_params_file(tmp_path: Path) -> None:
