@@ -336,3 +336,32 @@ def test_simulator_scales_a_maximum_concentration_without_a_new_extraction(temi_
     rebuilt = direct.simulate(changed, request)
     assert sim.extractions == 1
     np.testing.assert_allclose(scaled.pack_voltage_v, rebuilt.pack_voltage_v, rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("backend", ["auto", "numpy"])
+def test_a_run_continued_from_its_final_state_equals_one_run(temi_spm, backend):
+    model, modal = temi_spm
+    rng = np.random.default_rng(10)
+    duration_s, current_a = rng.uniform(2.0, 8.0, 400), rng.uniform(-1.0, 3.0, 400)
+    common = dict(temperature_k=298.15, backend=backend)
+    whole = run_cells(model, modal, duration_s, current_a, c_n0_mol_m3=model.built_values[C_N0],
+                      c_p0_mol_m3=model.built_values[C_P0], **common)
+    first = run_cells(model, modal, duration_s[:150], current_a[:150], c_n0_mol_m3=model.built_values[C_N0],
+                      c_p0_mol_m3=model.built_values[C_P0], **common)
+    rest = run_cells(model, modal, duration_s[150:], current_a[150:], initial_state=first.final_state, **common)
+    np.testing.assert_allclose(np.concatenate([first.start_voltage_v[0], rest.start_voltage_v[0]]),
+                               whole.start_voltage_v[0], rtol=0, atol=1e-10)
+    for got, want in zip(rest.final_state, whole.final_state):
+        np.testing.assert_allclose(got, want, rtol=1e-10)
+
+
+def test_final_state_at_the_cutoff_is_at_the_cutoff_voltage(temi_spm):
+    model, modal = temi_spm
+    c_n0 = 0.06 * model.blocks[0].scale_mol_m3
+    c_p0 = model.built_values[C_P0] + (model.built_values[C_N0] - c_n0) * 0.5
+    runs = run_cells(model, modal, np.full(720, 5.0), np.full(720, 2.0), c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
+                     temperature_k=298.15)
+    assert runs.reached_cutoff[0]
+    y_n, y_p = runs.final_state
+    v = model.cell_voltage_v(model.blocks[0].surface_row @ y_n[0], model.blocks[1].surface_row @ y_p[0], 2.0, 298.15)
+    assert float(v) == pytest.approx(model.lower_cutoff_v, abs=1e-8)

@@ -100,7 +100,7 @@ def _compile(numba, source: str, parallel: bool):
 
     @numba.njit(parallel=parallel, fastmath=False)
     def kernel(lam, drive, z0, duration_s, current_a, weights, temperature_k, eps_n, eps_p, height_m, cutoff_v,
-               tol_s, start_v, end_v, end_time, cutoff_step, at_start):  # pragma: no cover - compiled
+               tol_s, start_v, end_v, end_time, cutoff_step, at_start, z_end):  # pragma: no cover - compiled
         n_sets, n_modes = z0.shape
         n_steps = duration_s.shape[0]
         for s in numba.prange(n_sets):
@@ -170,7 +170,14 @@ def _compile(numba, source: str, parallel: bool):
                                 f_hi *= 0.5
                             side = 1
                     cutoff_step[s] = k
-                    end_time[s] = t + 0.5 * (lo + hi)
+                    tau = 0.5 * (lo + hi)
+                    end_time[s] = t + tau
+                    for j in range(n_modes):
+                        x = lam[s, j] * tau
+                        if lam[s, j] == 0.0:
+                            z[j] = z[j] + tau * drive[s, j] * i
+                        else:
+                            z[j] = math.exp(x) * z[j] + math.expm1(x) / lam[s, j] * drive[s, j] * i
                     break
                 end_v[s, k] = v1
                 for j in range(n_modes):
@@ -178,5 +185,7 @@ def _compile(numba, source: str, parallel: bool):
                 t += h
             if cutoff_step[s] == n_steps:
                 end_time[s] = t
+            for j in range(n_modes):
+                z_end[s, j] = z[j]
 
     return kernel

@@ -44,6 +44,8 @@ class ModalSystem:
         ``m V`` per electrode, shape (2, n_modes), zero outside the electrode's modes.
     to_modal : tuple of numpy.ndarray
         ``V^-1`` of each block.
+    from_modal : tuple of numpy.ndarray
+        ``V`` of each block.
     n_negative : int
         Number of negative-electrode modes.
     """
@@ -52,6 +54,7 @@ class ModalSystem:
     input_per_a_s: np.ndarray
     surface_weights: np.ndarray
     to_modal: tuple[np.ndarray, np.ndarray]
+    from_modal: tuple[np.ndarray, np.ndarray]
     n_negative: int
 
     @property
@@ -70,6 +73,11 @@ class ModalSystem:
         zn = np.atleast_2d(y_negative) @ self.to_modal[0].T
         zp = np.atleast_2d(y_positive) @ self.to_modal[1].T
         return np.hstack(np.broadcast_arrays(zn, zp))
+
+    def block_states(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """PyBaMM block states (stoichiometry profiles) of modal states (n_sets, n_modes)."""
+        z = np.atleast_2d(z)
+        return z[:, : self.n_negative] @ self.from_modal[0].T, z[:, self.n_negative:] @ self.from_modal[1].T
 
 
 def _decompose(block: ParticleBlock) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -93,9 +101,10 @@ def _decompose(block: ParticleBlock) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 def modal_system(model: LinearSpm) -> ModalSystem:
     """Diagonalise both particle blocks of ``model``."""
-    lams, inputs, invs, weights = [], [], [], []
+    lams, inputs, invs, vecs, weights = [], [], [], [], []
     for block in model.blocks:
         lam, vec, inv = _decompose(block)
+        vecs.append(vec)
         lams.append(lam)
         inputs.append(inv @ block.b_vector_per_a_s)
         invs.append(inv)
@@ -105,7 +114,8 @@ def modal_system(model: LinearSpm) -> ModalSystem:
     surface[0, :n_neg] = weights[0]
     surface[1, n_neg:] = weights[1]
     return ModalSystem(eigenvalues_per_s=np.concatenate(lams), input_per_a_s=np.concatenate(inputs),
-                       surface_weights=surface, to_modal=(invs[0], invs[1]), n_negative=n_neg)
+                       surface_weights=surface, to_modal=(invs[0], invs[1]),
+                       from_modal=(vecs[0], vecs[1]), n_negative=n_neg)
 
 
 def step_coefficients(lam: np.ndarray, duration_s) -> tuple[np.ndarray, np.ndarray]:

@@ -94,6 +94,9 @@ class CellRuns:
         True where the cell reached its lower cut-off.
     cutoff_step : numpy.ndarray
         Index of the step in which the run ended (n_steps when it did not).
+    final_state : tuple of numpy.ndarray
+        Negative and positive particle states at ``end_time_s`` (stoichiometry profiles,
+        (n_sets, n) each), to continue from with ``run_cells(..., initial_state=...)``.
     """
 
     step_start_s: np.ndarray
@@ -102,6 +105,7 @@ class CellRuns:
     end_time_s: np.ndarray
     reached_cutoff: np.ndarray
     cutoff_step: np.ndarray
+    final_state: tuple[np.ndarray, np.ndarray]
     extra: dict = field(default_factory=dict)
 
 
@@ -141,9 +145,9 @@ def _voltage(model: LinearSpm, batch: _Batch, surfaces: np.ndarray, current_a: n
                                 batch.eps_n[col], batch.eps_p[col], batch.height_m[col])
 
 
-def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, *, c_n0_mol_m3, c_p0_mol_m3,
-              temperature_k, sets: ParameterSets | None = None, backend: str = "auto",
-              keep_states: bool = False) -> CellRuns:
+def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, *, c_n0_mol_m3=None,
+              c_p0_mol_m3=None, temperature_k, sets: ParameterSets | None = None, backend: str = "auto",
+              keep_states: bool = False, initial_state: tuple[np.ndarray, np.ndarray] | None = None) -> CellRuns:
     """Run cells from uniform particles through constant-current steps until the cut-off.
 
     Parameters
@@ -154,6 +158,9 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
         Step lengths (s, > 0) and cell currents (A, positive = discharge), shape (n_steps,).
     c_n0_mol_m3, c_p0_mol_m3 : float or array_like
         Initial (uniform) electrode concentrations in mol/m3, scalar or (n_sets,).
+    initial_state : tuple of numpy.ndarray, optional
+        Instead of the concentrations: particle states (stoichiometry profiles, (n,) or
+        (n_sets, n) each), e.g. a previous run's :attr:`CellRuns.final_state`.
     temperature_k : float or array_like
         Cell temperature in K (isothermal), scalar or (n_sets,).
     sets : ParameterSets, optional
@@ -178,15 +185,22 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
     if backend not in ("auto", "numba", "numpy"):
         raise SimulationError(f"unknown engine backend '{backend}' (auto, numba or numpy)")
     sets = sets or ParameterSets()
-    n_sets = max(sets.size(), np.size(c_n0_mol_m3), np.size(c_p0_mol_m3), np.size(temperature_k))
+    if (initial_state is None) == (c_n0_mol_m3 is None or c_p0_mol_m3 is None):
+        raise SimulationError("give either both initial concentrations or an initial state")
+    n_state_sets = 1 if initial_state is None else max(np.atleast_2d(y).shape[0] for y in initial_state)
+    n_sets = max(sets.size(), np.size(c_n0_mol_m3), np.size(c_p0_mol_m3), np.size(temperature_k), n_state_sets)
     batch = _batch(model, modal, sets, n_sets, temperature_k)
-    c_n0 = np.broadcast_to(np.asarray(c_n0_mol_m3, dtype=float), (n_sets,))
-    c_p0 = np.broadcast_to(np.asarray(c_p0_mol_m3, dtype=float), (n_sets,))
-    c_max_n = model.blocks[0].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_n, dtype=float), (n_sets,))
-    c_max_p = model.blocks[1].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_p, dtype=float), (n_sets,))
-    y_n = np.outer(c_n0 / c_max_n, np.ones(model.blocks[0].b_vector_per_a_s.size))
-    y_p = np.outer(c_p0 / c_max_p, np.ones(model.blocks[1].b_vector_per_a_s.size))
-    z0 = modal.modal_state(y_n, y_p)
+    if initial_state is None:
+        c_max_n = model.blocks[0].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_n, dtype=float), (n_sets,))
+        c_max_p = model.blocks[1].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_p, dtype=float), (n_sets,))
+        c_n0 = np.broadcast_to(np.asarray(c_n0_mol_m3, dtype=float), (n_sets,))
+        c_p0 = np.broadcast_to(np.asarray(c_p0_mol_m3, dtype=float), (n_sets,))
+        y_n = np.outer(c_n0 / c_max_n, np.ones(model.blocks[0].b_vector_per_a_s.size))
+        y_p = np.outer(c_p0 / c_max_p, np.ones(model.blocks[1].b_vector_per_a_s.size))
+    else:
+        y_n, y_p = (np.broadcast_to(np.atleast_2d(np.asarray(y, dtype=float)), (n_sets, blk.b_vector_per_a_s.size))
+                    for y, blk in zip(initial_state, model.blocks))
+    z0 = np.ascontiguousarray(np.broadcast_to(modal.modal_state(y_n, y_p), (n_sets, modal.n_modes)))
     edges = np.concatenate([[0.0], np.cumsum(duration_s)])
     kernel = None if keep_states or backend == "numpy" else fused_kernel(model, parallel=n_sets >= PARALLEL_MIN_SETS)
     if kernel is not None:
@@ -203,17 +217,18 @@ def _run_fused(kernel, model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: 
     end_time = np.empty(n_sets)
     cutoff_step = np.empty(n_sets, dtype=np.int64)
     at_start = np.empty(n_sets, dtype=np.bool_)
+    z_end = np.empty((n_sets, modal.n_modes))
     kernel(np.ascontiguousarray(batch.lam), np.ascontiguousarray(batch.drive), np.ascontiguousarray(z0), duration_s,
            current, np.ascontiguousarray(modal.surface_weights), np.ascontiguousarray(batch.temperature_k),
            np.ascontiguousarray(batch.eps_n), np.ascontiguousarray(batch.eps_p), np.ascontiguousarray(batch.height_m),
-           float(model.lower_cutoff_v), CUTOFF_TIME_TOL_S, start_v, end_v, end_time, cutoff_step, at_start)
+           float(model.lower_cutoff_v), CUTOFF_TIME_TOL_S, start_v, end_v, end_time, cutoff_step, at_start, z_end)
     if not np.all(np.isfinite(end_time)):
         raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
     ended_at_start = np.nonzero(at_start)[0]
     start_v[ended_at_start, cutoff_step[ended_at_start]] = np.nan
     return CellRuns(step_start_s=edges[:-1], start_voltage_v=start_v, end_voltage_v=end_v, end_time_s=end_time,
                     reached_cutoff=cutoff_step < n_steps, cutoff_step=cutoff_step,
-                    extra={"backend": "numba-fused", "batch": batch})
+                    final_state=modal.block_states(z_end), extra={"backend": "numba-fused", "batch": batch})
 
 
 def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.ndarray, duration_s: np.ndarray,
@@ -234,12 +249,19 @@ def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nd
     at_start = any_below & (start_v[np.arange(n_sets), np.minimum(cutoff_step, duration_s.size - 1)] < cut)
     end_time[at_start] = edges[cutoff_step[at_start]]
     inside = np.nonzero(any_below & ~at_start)[0]
+    z_final = z_end.copy()
     if inside.size:
         z_k = states_at(batch.lam[inside], batch.drive[inside], checkpoints[inside], duration_s, current,
                         cutoff_step[inside], stride)
         tau = _cutoff_in_step(model, modal, _take(batch, inside), z_k, duration_s[cutoff_step[inside]],
                               current[cutoff_step[inside]])
         end_time[inside] = edges[cutoff_step[inside]] + tau
+        decay, phi = step_coefficients(batch.lam[inside], tau[:, None])
+        z_final[inside] = decay * z_k + phi * batch.drive[inside] * current[cutoff_step[inside]][:, None]
+    starts = np.nonzero(at_start)[0]
+    if starts.size:
+        z_final[starts] = states_at(batch.lam[starts], batch.drive[starts], checkpoints[starts], duration_s, current,
+                                    cutoff_step[starts], stride)
     cols = np.arange(duration_s.size)[None, :]
     first_gone = cutoff_step + np.where(at_start, 0, 1)  # the cut-off step's start is kept when above the cut-off
     start_v = np.where(cols >= first_gone[:, None], np.nan, start_v)
@@ -248,7 +270,8 @@ def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nd
     extra = {"checkpoints": checkpoints, "stride": stride, "z_end": z_end, "lam": batch.lam, "drive": batch.drive,
              "batch": batch, "backend": used, "surfaces": surfaces}
     return CellRuns(step_start_s=edges[:-1], start_voltage_v=start_v, end_voltage_v=end_v, end_time_s=end_time,
-                    reached_cutoff=any_below, cutoff_step=cutoff_step, extra=extra)
+                    reached_cutoff=any_below, cutoff_step=cutoff_step, final_state=modal.block_states(z_final),
+                    extra=extra)
 
 
 def _take(batch: _Batch, idx: np.ndarray) -> _Batch:
