@@ -16,7 +16,7 @@ import weakref
 
 import numpy as np
 
-from battery_predictor.simulation.engine.model import VOLTAGE_ROWS, LinearSpm
+from battery_predictor.simulation.engine.model import CURRENT, VOLTAGE_ROWS, LinearSpm
 
 #: NumPy functions of the printed voltage expression and their scalar replacements.
 _SCALAR_FUNCTIONS = {
@@ -26,6 +26,7 @@ _SCALAR_FUNCTIONS = {
 }
 _ROW = re.compile(r"y\[(\d+):(\d+)\]")
 _NP_CALL = re.compile(r"np\.\w+")
+_NAME = re.compile(r"\b(?:var_m?\d+|y\d+)\b")
 #: Compiled kernels by (printed voltage source, parallel).
 _CACHE: dict[tuple[str, bool], object] = {}
 #: Printed voltage source by model (printing takes milliseconds).
@@ -55,7 +56,39 @@ def scalar_voltage_source(model: LinearSpm) -> str | None:
     lines = [line for line in body.splitlines() if line.strip()]
     result = lines[-1].split("=", 1)[0].strip()
     args = ", ".join(f"y{k}" for k in range(len(VOLTAGE_ROWS)))
-    return f"def cell_voltage({args}):\n    " + "\n    ".join(lines) + f"\n    return {result}\n"
+    single = f"def cell_voltage({args}):\n    " + "\n    ".join(lines) + f"\n    return {result}\n"
+    return single + "\n\n" + _pair_source(lines, result)
+
+
+def _pair_source(lines: list[str], result: str) -> str:
+    """``cell_voltage_pair``: the voltage at one state under two currents, sharing what the current does not change.
+
+    Statements that do not depend on the current row (open-circuit potentials, exchange-current
+    densities) run once; those that do run twice, renamed.
+    """
+    current_row = f"y{VOLTAGE_ROWS.index(CURRENT)}"
+    dependent = {current_row}
+    shared, per_current = [], []
+    for line in lines:
+        target, expr = (part.strip() for part in line.split("=", 1))
+        if set(_NAME.findall(expr)) & dependent:
+            dependent.add(target)
+            per_current.append((target, expr))
+        else:
+            shared.append(line)
+
+    def renamed(suffix: str) -> list[str]:
+        def sub(match: re.Match) -> str:
+            name = match.group(0)
+            return f"{name}_{suffix}" if name in dependent else name
+        return [f"{target}_{suffix} = {_NAME.sub(sub, expr)}" for target, expr in per_current]
+
+    args = ", ".join(f"y{k}" for k in range(len(VOLTAGE_ROWS)))
+    args = args.replace(current_row, f"{current_row}_a, {current_row}_b")
+    out_a = f"{result}_a" if result in dependent else result
+    out_b = f"{result}_b" if result in dependent else result
+    body = shared + renamed("a") + renamed("b")
+    return f"def cell_voltage_pair({args}):\n    " + "\n    ".join(body) + f"\n    return {out_a}, {out_b}\n"
 
 
 def fused_kernel(model: LinearSpm, *, parallel: bool = False):
@@ -83,6 +116,7 @@ def _compile(numba, source: str, parallel: bool):
     namespace: dict = {"math": math}
     exec(compile(source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - code printed by PyBaMM from the model
     voltage = numba.njit(fastmath=False)(namespace["cell_voltage"])
+    voltage_pair = numba.njit(fastmath=False)(namespace["cell_voltage_pair"])
 
     @numba.njit(fastmath=False)
     def within(z, lam, drive, weights, tau, current):  # pragma: no cover - compiled
@@ -113,15 +147,16 @@ def _compile(numba, source: str, parallel: bool):
             at_start[s] = False
             end_time[s] = 0.0
             temp, en, ep, hh = temperature_k[s], eps_n[s], eps_p[s], height_m[s]
+            sn = 0.0
+            sp = 0.0
+            for j in range(n_modes):
+                sn += weights[0, j] * z[j]
+                sp += weights[1, j] * z[j]
+            v_next = voltage(sn, sp, current_a[0], temp, en, ep, hh)
             for k in range(n_steps):
                 h = duration_s[k]
                 i = current_a[k]
-                sn = 0.0
-                sp = 0.0
-                for j in range(n_modes):
-                    sn += weights[0, j] * z[j]
-                    sp += weights[1, j] * z[j]
-                v0 = voltage(sn, sp, i, temp, en, ep, hh)
+                v0 = v_next
                 start_v[s, k] = v0
                 if not v0 >= cutoff_v:
                     cutoff_step[s] = k
@@ -143,7 +178,10 @@ def _compile(numba, source: str, parallel: bool):
                     zj = decay[j] * z[j] + phid[j] * i
                     sn += weights[0, j] * zj
                     sp += weights[1, j] * zj
-                v1 = voltage(sn, sp, i, temp, en, ep, hh)
+                if k + 1 < n_steps:  # the step's end and the next step's start share the state
+                    v1, v_next = voltage_pair(sn, sp, i, current_a[k + 1], temp, en, ep, hh)
+                else:
+                    v1 = voltage(sn, sp, i, temp, en, ep, hh)
                 if not v1 >= cutoff_v:
                     # root inside the step: Illinois regula falsi on the exact within-step solution
                     lo, hi, f_lo, f_hi, side = 0.0, h, v0 - cutoff_v, v1 - cutoff_v, 0
