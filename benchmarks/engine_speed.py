@@ -1,0 +1,195 @@
+"""Engine speed and agreement benchmark (issue 18): every simulator side by side in one run.
+
+For a 6 h Temi-like day and a 5 h Ranger-like day (5 s steps, every step a new current), prints
+the wall time of one simulation with
+
+- liionpack (the reference, every cell simulated);
+- the fast path, first call (PyBaMM build + IDAKLU solve) and re-solve (PyBaMM IDAKLU with the
+  current as an interpolant, the project's tolerances rtol 1e-6 / atol 1e-8);
+- the engine through the simulator interface (first call with the PyBaMM extraction, then a
+  repeat: initial state, run, report voltages), and its own run time;
+- the engine's cell run alone: fused Numba kernel and NumPy path, single set and batched over
+  1 / 100 / 1000 parameter sets (radii, diffusivities, thicknesses, active fractions +-20 %,
+  seeded), best of ``--repeat``;
+
+and the engine's agreement on the full day with PyBaMM's IDAKLU at rtol = atol = 1e-10 (RMS pack
+voltage, time to cut-off) and with liionpack.
+
+Usage: nice .venv/bin/python benchmarks/engine_speed.py [--repeat 5] [--skip-liionpack]
+       [--skip-reference] [--numpy-sets 100]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from battery_predictor.params import load_params  # noqa: E402
+from battery_predictor.profiles.load_profile import LoadProfile  # noqa: E402
+from battery_predictor.profiles.ranger import longest_route, route_profile  # noqa: E402
+from battery_predictor.profiles.temi import generate_usage_profile  # noqa: E402
+from battery_predictor.simulation import SimulationRequest, StepLoad  # noqa: E402
+from battery_predictor.simulation.cell_setup import initial_concentrations, prepared_parameter_values  # noqa: E402
+from battery_predictor.simulation.engine.kernel import fused_kernel  # noqa: E402
+from battery_predictor.simulation.engine.modal import modal_system  # noqa: E402
+from battery_predictor.simulation.engine.model import extract_linear_spm  # noqa: E402
+from battery_predictor.simulation.engine.pack import pack_voltage_v  # noqa: E402
+from battery_predictor.simulation.engine.run import ParameterSets, run_cells  # noqa: E402
+from battery_predictor.simulation.engine.simulator import EngineSimulator  # noqa: E402
+from battery_predictor.simulation.fast import FastPackSimulator  # noqa: E402
+
+STEP_S = 5.0
+SET_KEYS = ("radius_n", "radius_p", "diffusivity_n", "diffusivity_p", "thickness_n", "thickness_p", "fraction_n",
+            "fraction_p")
+
+
+def temi_day() -> tuple[str, object, SimulationRequest]:
+    params = load_params(REPO / "params" / "temi.yaml")
+    load = StepLoad.from_profile(generate_usage_profile(seed=0, max_duration_s=6 * 3600)).resample(STEP_S)
+    return "Temi 6 h", params, SimulationRequest(load=load, initial_soc=0.62)
+
+
+def ranger_day() -> tuple[str, object, SimulationRequest]:
+    params = load_params(REPO / "params" / "ranger_mini.yaml")
+    routes = [route_profile(longest_route(payload), seed=k) for k, payload in enumerate([20.0, 40.0, 60.0, 80.0] * 4)]
+    day = LoadProfile(np.concatenate([r.duration_s for r in routes]), np.concatenate([r.current_a for r in routes]))
+    load = StepLoad.from_profile(day).truncate(5 * 3600).resample(STEP_S)
+    return "Ranger 5 h", params, SimulationRequest(load=load, initial_soc=0.47)
+
+
+def best_of(fn, repeat: int) -> tuple[float, object]:
+    """(shortest wall time in s, last result) of ``repeat`` calls."""
+    best, out = np.inf, None
+    for _ in range(repeat):
+        tic = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - tic)
+    return best, out
+
+
+def compare(a, b) -> str:
+    """RMS pack-voltage difference (mV) on common report times and relative end-time difference (%)."""
+    n = min(a.time_s.size, b.time_s.size)
+    same = np.abs(a.time_s[:n] - b.time_s[:n]) < 1e-6
+    d = (a.pack_voltage_v[:n] - b.pack_voltage_v[:n])[same]
+    rms_mv = float(np.sqrt(np.mean(d ** 2)) * 1e3)
+    dt_pct = abs(a.end_time_s - b.end_time_s) / b.end_time_s * 100.0
+    return f"RMS {rms_mv:.4f} mV, end {a.end_time_s:.1f} s vs {b.end_time_s:.1f} s ({dt_pct:.4f} %)"
+
+
+def reference_comparison(params, request: SimulationRequest, engine_result) -> str:
+    """The engine against IDAKLU at 1e-10 evaluated at the engine's report times."""
+    ref = FastPackSimulator(rtol=1e-10, atol=1e-10)
+    tic = time.perf_counter()
+    res = ref.simulate(params, request)
+    seconds = time.perf_counter() - tic
+    t = engine_result.time_s[engine_result.time_s <= res.end_time_s]
+    v_cell = np.asarray(res.extra["solution"]["Terminal voltage [V]"](t), dtype=float)
+    v_ref = pack_voltage_v(v_cell, request.load.current_at(t), series=params.series, r_eq_ohm=res.extra["r_eq_ohm"])
+    d = engine_result.pack_voltage_v[: t.size] - v_ref
+    dt_pct = abs(engine_result.end_time_s - res.end_time_s) / res.end_time_s * 100.0
+    return (f"{seconds:8.2f} s   engine vs IDAKLU 1e-10: RMS {np.sqrt(np.mean(d ** 2)) * 1e3:.4f} mV, "
+            f"end {engine_result.end_time_s:.2f} s vs {res.end_time_s:.2f} s ({dt_pct:.5f} %)")
+
+
+def row(label: str, seconds: float, note: str = "") -> None:
+    print(f"  {label:<58s} {seconds * 1e3:12.2f} ms   {note}")
+
+
+def bench_day(name: str, params, request: SimulationRequest, args) -> None:
+    load = request.load
+    print(f"\n{name}: {params.name} {params.series}S{params.parallel}P, {load.duration_s / 3600:.2f} h, "
+          f"{load.start_s.size} steps of {STEP_S:g} s, mean {load.mean_current_a():.2f} A, SOC0 {request.initial_soc}")
+    lp_result = None
+    if not args.skip_liionpack:
+        from battery_predictor.simulation.liionpack_sim import LiionpackSimulator
+
+        seconds, lp_result = best_of(lambda: LiionpackSimulator(period_s=STEP_S).simulate(params, request), 1)
+        row("liionpack (reference, every cell)", seconds, lp_result.termination)
+    fast = FastPackSimulator()
+    seconds, fast_result = best_of(lambda: fast.simulate(params, request), 1)
+    row("fast path, first call (PyBaMM build + IDAKLU solve)", seconds)
+    seconds, fast_result = best_of(lambda: fast.simulate(params, request), args.repeat)
+    row("PyBaMM IDAKLU re-solve (interpolant current, 1e-6/1e-8)", seconds, fast_result.termination)
+    engine = EngineSimulator(fallback=None)
+    seconds, _ = best_of(lambda: engine.simulate(params, request), 1)
+    row("engine simulator, first call (PyBaMM extraction + run)", seconds)
+    own_s = []
+
+    def engine_call():
+        result = engine.simulate(params, request)
+        own_s.append(result.extra["engine_seconds"])
+        return result
+
+    seconds, eng_result = best_of(engine_call, args.repeat)
+    row("engine simulator, repeat (initial state + run + report)", seconds,
+        f"engine's own time {min(own_s) * 1e3:.2f} ms (best of {len(own_s)}, {eng_result.extra['engine_backend']})")
+
+    model = extract_linear_spm(params)
+    modal = modal_system(model)
+    pv = prepared_parameter_values(params)
+    c_n0, c_p0 = initial_concentrations(params, pv, initial_soc=request.initial_soc, initial_cell_ocv_v=None)
+    duration_s = np.diff(load.edges_s())
+    current_a = load.current_a / params.parallel
+    temperature_k = params.ambient_temperature_k
+    rng = np.random.default_rng(0)
+
+    def runner(n_sets: int, backend: str):
+        sets = None if n_sets == 0 else ParameterSets(**{k: rng.uniform(0.8, 1.2, n_sets) for k in SET_KEYS})
+        return lambda: run_cells(model, modal, duration_s, current_a, c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
+                                 temperature_k=temperature_k, sets=sets, backend=backend)
+
+    has_kernel = fused_kernel(model) is not None
+    tic = time.perf_counter()
+    runner(0, "auto")()
+    serial_s = time.perf_counter() - tic
+    tic = time.perf_counter()
+    runner(100, "auto")()
+    print(f"  (first calls with this model's Numba compilation: serial {serial_s:.1f} s, parallel "
+          f"{time.perf_counter() - tic:.1f} s; {'fused kernel' if has_kernel else 'no fused kernel: NumPy voltage'})")
+    for label, n_sets, backend in [("engine run, single cell, fused Numba kernel", 0, "auto"),
+                                   ("engine run, single cell, NumPy path", 0, "numpy"),
+                                   ("engine run, 1 parameter set, fused Numba kernel", 1, "auto"),
+                                   ("engine run, 100 parameter sets, fused Numba kernel", 100, "auto"),
+                                   ("engine run, 1000 parameter sets, fused Numba kernel", 1000, "auto"),
+                                   (f"engine run, {args.numpy_sets} parameter sets, NumPy path", args.numpy_sets,
+                                    "numpy")]:
+        fn = runner(n_sets, backend)
+        fn()
+        seconds, runs = best_of(fn, args.repeat if n_sets < 1000 else max(1, args.repeat // 2))
+        note = f"{runs.reached_cutoff.sum()}/{runs.reached_cutoff.size} reach the cut-off"
+        if n_sets > 1:
+            note += f", {seconds / n_sets * 1e3:.3f} ms per set"
+        row(label, seconds, note)
+    print("  agreement:")
+    print(f"    engine vs fast path (1e-6/1e-8, its own report times): {compare(eng_result, fast_result)}")
+    if lp_result is not None:
+        print(f"    engine vs liionpack:                                   {compare(eng_result, lp_result)}")
+    if not args.skip_reference:
+        print(f"    IDAKLU 1e-10 solve: {reference_comparison(params, request, eng_result)}")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=5, help="repetitions of each timed row (best is printed)")
+    ap.add_argument("--skip-liionpack", action="store_true", help="leave out the liionpack rows (~1 min per day)")
+    ap.add_argument("--skip-reference", action="store_true", help="leave out the IDAKLU 1e-10 agreement")
+    ap.add_argument("--numpy-sets", type=int, default=100, help="sets of the batched NumPy row")
+    args = ap.parse_args()
+    import os
+
+    print(f"engine_speed: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} at start")
+    for name, params, request in (temi_day(), ranger_day()):
+        bench_day(name, params, request, args)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
