@@ -365,3 +365,29 @@ def test_final_state_at_the_cutoff_is_at_the_cutoff_voltage(temi_spm):
     y_n, y_p = runs.final_state
     v = model.cell_voltage_v(model.blocks[0].surface_row @ y_n[0], model.blocks[1].surface_row @ y_p[0], 2.0, 298.15)
     assert float(v) == pytest.approx(model.lower_cutoff_v, abs=1e-8)
+
+
+def test_without_numba_the_numpy_path_runs_and_agrees(temi_spm, monkeypatch):
+    model, modal = temi_spm
+    rng = np.random.default_rng(11)
+    duration_s, current_a = np.full(300, 5.0), rng.uniform(0.0, 4.0, 300)
+    common = dict(c_n0_mol_m3=0.1 * model.blocks[0].scale_mol_m3, c_p0_mol_m3=model.built_values[C_P0] * 1.3,
+                  temperature_k=298.15)
+    with_numba = run_cells(model, modal, duration_s, current_a, **common)
+    monkeypatch.setitem(__import__("sys").modules, "numba", None)  # import numba now raises ImportError
+    without = run_cells(model, modal, duration_s, current_a, **common)
+    assert without.extra["backend"] == "numpy"
+    assert with_numba.reached_cutoff[0] and without.reached_cutoff[0]
+    np.testing.assert_allclose(without.end_time_s, with_numba.end_time_s, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(without.start_voltage_v, with_numba.start_voltage_v, rtol=0, atol=1e-10)
+
+
+def test_a_voltage_without_a_scalar_form_runs_on_the_numpy_voltage(temi_spm, monkeypatch):
+    from battery_predictor.simulation.engine import run as run_module
+
+    model, modal = temi_spm
+    monkeypatch.setattr(run_module, "fused_kernel", lambda *args, **kwargs: None)
+    runs = run_cells(model, modal, np.full(50, 5.0), np.full(50, 2.0), c_n0_mol_m3=model.built_values[C_N0],
+                     c_p0_mol_m3=model.built_values[C_P0], temperature_k=298.15)
+    assert runs.extra["backend"] in ("numba", "numpy")
+    assert np.all(np.isfinite(runs.start_voltage_v))
