@@ -7,7 +7,9 @@ the wall time of one simulation with
 - the fast path, first call (PyBaMM build + IDAKLU solve) and re-solve (PyBaMM IDAKLU with the
   current as an interpolant, the project's tolerances rtol 1e-6 / atol 1e-8);
 - the engine through the simulator interface (first call with the PyBaMM extraction, then a
-  repeat: initial state, run, report voltages), and its own run time;
+  repeat: initial state, run, report voltages), and its own run time; then 1000 calls with the
+  params' fit parameters drawn within +-20 % (the simulations of a 1000-trial fit, without the
+  optimiser and the cost function);
 - the engine's cell run alone: fused Numba kernel and NumPy path, single set and batched over
   1 / 100 / 1000 parameter sets (radii, diffusivities, thicknesses, active fractions +-20 %,
   seeded), best of ``--repeat``;
@@ -31,6 +33,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from battery_predictor.errors import SimulationError  # noqa: E402
 from battery_predictor.params import load_params  # noqa: E402
 from battery_predictor.profiles.load_profile import LoadProfile  # noqa: E402
 from battery_predictor.profiles.ranger import longest_route, route_profile  # noqa: E402
@@ -99,6 +102,28 @@ def reference_comparison(params, request: SimulationRequest, engine_result) -> s
             f"end {engine_result.end_time_s:.2f} s vs {res.end_time_s:.2f} s ({dt_pct:.5f} %)")
 
 
+def fit_calls(engine: EngineSimulator, params, request: SimulationRequest, n_calls: int) -> None:
+    """``n_calls`` simulations with the params' fit parameters drawn within +-20 % (seeded), as a fit makes them."""
+    if n_calls <= 0:
+        return
+    rng = np.random.default_rng(1)
+    base = {**params.cell_values, **params.interconnect}
+    names = [name for name in params.fit.parameters if name in base]
+    failed = 0
+    extractions = engine.extractions
+    tic = time.perf_counter()
+    for _ in range(n_calls):
+        trial = params.with_values({name: float(base[name]) * rng.uniform(0.8, 1.2) for name in names})
+        try:
+            engine.simulate(trial, request)
+        except SimulationError:
+            failed += 1
+    seconds = time.perf_counter() - tic
+    row(f"engine simulator, {n_calls} calls with {len(names)} fit parameters +-20 %", seconds,
+        f"{seconds / n_calls * 1e3:.2f} ms per call, {failed} failed, "
+        f"{engine.extractions - extractions} new extractions")
+
+
 def row(label: str, seconds: float, note: str = "") -> None:
     print(f"  {label:<58s} {seconds * 1e3:12.2f} ms   {note}")
 
@@ -131,6 +156,7 @@ def bench_day(name: str, params, request: SimulationRequest, args) -> None:
     seconds, eng_result = best_of(engine_call, args.repeat)
     row("engine simulator, repeat (initial state + run + report)", seconds,
         f"engine's own time {min(own_s) * 1e3:.2f} ms (best of {len(own_s)}, {eng_result.extra['engine_backend']})")
+    fit_calls(engine, params, request, args.fit_calls)
 
     model = extract_linear_spm(params)
     modal = modal_system(model)
@@ -182,6 +208,7 @@ def main() -> int:
     ap.add_argument("--skip-liionpack", action="store_true", help="leave out the liionpack rows (~1 min per day)")
     ap.add_argument("--skip-reference", action="store_true", help="leave out the IDAKLU 1e-10 agreement")
     ap.add_argument("--numpy-sets", type=int, default=100, help="sets of the batched NumPy row")
+    ap.add_argument("--fit-calls", type=int, default=1000, help="simulations of the fit-like row (0: none)")
     args = ap.parse_args()
     import os
 
