@@ -10,7 +10,7 @@ import scipy.linalg
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.engine import pack_voltage_v, series_resistance_factor
-from battery_predictor.simulation.engine.modal import boundary_surfaces, modal_system
+from battery_predictor.simulation.engine.modal import boundary_surfaces, modal_system, numba_available
 from battery_predictor.simulation.engine.model import (
     C_N0,
     C_P0,
@@ -391,3 +391,20 @@ def test_a_voltage_without_a_scalar_form_runs_on_the_numpy_voltage(temi_spm, mon
                      c_p0_mol_m3=model.built_values[C_P0], temperature_k=298.15)
     assert runs.extra["backend"] in ("numba", "numpy")
     assert np.all(np.isfinite(runs.start_voltage_v))
+
+
+def test_simulator_reports_step_starts_from_the_fused_run_as_from_kept_states(temi_params):
+    from battery_predictor.simulation import SimulationRequest, StepLoad
+    from battery_predictor.simulation.engine.simulator import EngineSimulator
+
+    load = StepLoad.from_durations(np.full(400, 5.0), np.random.default_rng(12).uniform(5.0, 30.0, 400))
+    sim = EngineSimulator(fallback=None)
+    on_starts = sim.simulate(temi_params, SimulationRequest(load=load, initial_soc=0.2, output_time_s=load.start_s))
+    with_mids = sim.simulate(temi_params, SimulationRequest(load=load, initial_soc=0.2,
+                                                            output_time_s=np.append(load.start_s, 2.5)))
+    assert on_starts.termination == with_mids.termination == "cell_cutoff"
+    assert on_starts.extra["engine_backend"] == ("numba-fused" if numba_available() else "numpy")
+    assert on_starts.end_time_s == pytest.approx(with_mids.end_time_s, abs=1e-6)
+    n = on_starts.time_s.size
+    np.testing.assert_array_equal(with_mids.time_s[:n], on_starts.time_s)
+    np.testing.assert_allclose(on_starts.pack_voltage_v, with_mids.pack_voltage_v[:n], rtol=0, atol=1e-9)

@@ -296,12 +296,18 @@ class EngineSimulator:
         duration_s = np.diff(load.edges_s())
         cell_current_a = load.current_a / params.parallel
         t_engine = time.perf_counter()
-        runs = run_cells(model, modal, duration_s, cell_current_a, c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
-                         temperature_k=temperature_k, sets=sets, backend=self.backend, keep_states=True)
-        end_time_s = float(runs.end_time_s[0])
         t_out = request.output_times()
-        t_out = t_out[t_out < end_time_s] if runs.reached_cutoff[0] else t_out[t_out <= end_time_s]
-        v_cell = voltages_at_times(model, runs, modal, duration_s, cell_current_a, t_out)[0]
+        step = np.clip(np.searchsorted(load.start_s, t_out, side="right") - 1, 0, load.start_s.size - 1)
+        on_starts = bool(np.all(t_out == load.start_s[step]))  # then the run's step-start voltages are the report
+        runs = run_cells(model, modal, duration_s, cell_current_a, c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
+                         temperature_k=temperature_k, sets=sets, backend=self.backend, keep_states=not on_starts)
+        end_time_s = float(runs.end_time_s[0])
+        keep = t_out < end_time_s if runs.reached_cutoff[0] else t_out <= end_time_s
+        t_out = t_out[keep]
+        if on_starts:
+            v_cell = runs.start_voltage_v[0, step[keep]]
+        else:
+            v_cell = voltages_at_times(model, runs, modal, duration_s, cell_current_a, t_out)[0]
         engine_s = time.perf_counter() - t_engine
         i_pack = load.current_at(t_out)
         p = params.interconnect
