@@ -124,6 +124,21 @@ def fit_calls(engine: EngineSimulator, params, request: SimulationRequest, n_cal
         f"{engine.extractions - extractions} new extractions")
 
 
+def route_answer(model, modal, params, c_n0: float, c_p0: float, duration_s, current_a, repeat: int) -> None:
+    """The engine's part of a route answer: the longest route at 80 kg plus 60 s at 1.70 A from a carried state.
+
+    The state is the one after the day's first 10 min (non-uniform particles), as the predictor carries it.
+    """
+    before = run_cells(model, modal, duration_s[:120], current_a[:120], c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
+                       temperature_k=298.15)
+    route = StepLoad.from_profile(route_profile(longest_route(80.0), mode="mean")).append(StepLoad.constant(1.70, 60.0))
+    steps, amps = np.diff(route.edges_s()), route.current_a / params.parallel
+    seconds, runs = best_of(lambda: run_cells(model, modal, steps, amps, initial_state=before.final_state,
+                                              temperature_k=298.15), max(repeat, 20))
+    row(f"engine run, longest route ({steps.size} steps) + 60 s at 1.70 A, from a carried state", seconds,
+        f"last voltage {params.series * runs.start_voltage_v[0, -1]:.3f} V (pack, before R_eq)")
+
+
 def row(label: str, seconds: float, note: str = "") -> None:
     print(f"  {label:<58s} {seconds * 1e3:12.2f} ms   {note}")
 
@@ -169,6 +184,7 @@ def bench_day(name: str, params, request: SimulationRequest, args) -> None:
 
     def runner(n_sets: int, backend: str):
         sets = None if n_sets == 0 else ParameterSets(**{k: rng.uniform(0.8, 1.2, n_sets) for k in SET_KEYS})
+
         return lambda: run_cells(model, modal, duration_s, current_a, c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
                                  temperature_k=temperature_k, sets=sets, backend=backend)
 
@@ -194,6 +210,8 @@ def bench_day(name: str, params, request: SimulationRequest, args) -> None:
         if n_sets > 1:
             note += f", {seconds / n_sets * 1e3:.3f} ms per set"
         row(label, seconds, note)
+    if params.name.startswith("ranger"):
+        route_answer(model, modal, params, c_n0, c_p0, duration_s, current_a, args.repeat)
     print("  agreement:")
     print(f"    engine vs fast path (1e-6/1e-8, its own report times): {compare(eng_result, fast_result)}")
     if lp_result is not None:
