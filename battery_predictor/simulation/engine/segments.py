@@ -1,0 +1,217 @@
+"""Segment runs on the engine for predictions: from an SOC or a carried state, sampled inside segments.
+
+:class:`EnginePack` is the engine's counterpart of the predictor's re-solvable PyBaMM pack model: a
+pack of identical cells (the cell carries ``I_pack / parallel``; :func:`pack_voltage_v` with
+``R_eq``) runs ``[(duration_s, pack_current_a), ...]`` from a state of charge (uniform particles,
+PyBaMM's linear SOC between the 0 % and 100 % open-circuit voltages) or from the particle state a
+previous run ended in, and reports the pack voltage at samples inside every segment (each
+segment's end sampled under the segment's own current) until the cell's lower cut-off.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from battery_predictor.errors import SimulationError
+from battery_predictor.simulation.cell_setup import prepared_parameter_values
+from battery_predictor.simulation.engine.modal import modal_system
+from battery_predictor.simulation.engine.model import extract_linear_spm
+from battery_predictor.simulation.engine.pack import pack_voltage_v
+from battery_predictor.simulation.engine.run import run_cells, states_at_times
+from battery_predictor.simulation.engine.simulator import CELL_MODEL_EXTENSIONS
+from battery_predictor.simulation.engine.state import StoichiometryWindow
+from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+#: Stoichiometries a starting SOC must keep away from 0 and 1.
+_SOC_MARGIN = 0.02
+
+
+@dataclass(frozen=True)
+class EngineState:
+    """Where a run ended, to continue from.
+
+    Attributes
+    ----------
+    particles : tuple of numpy.ndarray
+        Negative and positive particle states (stoichiometry profiles).
+    soc_start : float
+        SOC the first run started from.
+    charge_ah : float
+        Net pack charge drawn since then (Ah, positive = discharge).
+    """
+
+    particles: tuple[np.ndarray, np.ndarray]
+    soc_start: float
+    charge_ah: float
+
+
+@dataclass(frozen=True)
+class EngineSegmentRun:
+    """A run of constant-current segments.
+
+    Attributes
+    ----------
+    time_s : numpy.ndarray
+        Sample times in s from the start.
+    pack_voltage_v : numpy.ndarray
+        Pack voltage in V at those times.
+    pack_current_a : numpy.ndarray
+        Pack current in A (positive = discharge) of the segment each sample belongs to.
+    segment_end_index : list of int
+        Index into ``time_s`` of the last sample of each completed segment.
+    reached_cutoff : bool
+        True when the cell reached its lower cut-off before the end.
+    end_time_s : float
+        When the run ended (s).
+    final_state : EngineState
+        State at the end (at the cut-off when reached).
+    """
+
+    time_s: np.ndarray
+    pack_voltage_v: np.ndarray
+    pack_current_a: np.ndarray
+    segment_end_index: list[int]
+    reached_cutoff: bool
+    end_time_s: float
+    final_state: EngineState
+
+
+class EnginePack:
+    """A pack of identical cells on the engine, for runs of segments (see module docstring).
+
+    Parameters
+    ----------
+    params : PackParams
+        The pack; extensions outside the engine's cell-model ones raise.
+    current_offset_a : float
+        Pack current-sensor offset (A): the cells carry ``current - offset``.
+    samples_per_segment : int
+        Minimum samples inside each segment (its end always included).
+    max_spacing_s : float
+        Largest spacing of samples in s.
+    backend : str
+        Engine backend (``"auto"``, ``"numba"``, ``"numpy"``).
+    """
+
+    def __init__(self, params, *, current_offset_a: float = 0.0, samples_per_segment: int = 4,
+                 max_spacing_s: float = 30.0, backend: str = "auto") -> None:
+        outside = sorted(set(params.extensions) - set(CELL_MODEL_EXTENSIONS))
+        if params.model != "SPM" or outside:
+            raise SimulationError(f"the engine does not cover model {params.model} with extensions {outside}")
+        self.params = params
+        self.current_offset_a = float(current_offset_a)
+        self.samples_per_segment = int(samples_per_segment)
+        self.max_spacing_s = float(max_spacing_s)
+        self.backend = backend
+        self.model = extract_linear_spm(params)
+        self.modal = modal_system(self.model)
+        pv = prepared_parameter_values(params)
+        self.window = StoichiometryWindow(self.model, pv)
+        p = params.interconnect
+        self.r_eq_ohm = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
+                                                          p["r_t_ohm"])
+        volume_m3 = float(pv["Electrode height [m]"]) * float(pv["Electrode width [m]"])
+        #: Pack capacity between 0 % and 100 % SOC in Ah (negative electrode window).
+        self.capacity_ah = (abs(self.window.x_100 - self.window.x_0) * self.window.n_n * volume_m3 * 96485.33212
+                            / 3600.0 * params.parallel)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def soc_bounds(self) -> tuple[float, float]:
+        """Widest SOC range whose stoichiometries stay inside (0, 1) with a 2 % margin."""
+        w = self.window
+        socs = []
+        for x in (_SOC_MARGIN, 1.0 - _SOC_MARGIN):
+            socs.append((x - w.x_0) / (w.x_100 - w.x_0))
+        y_0, y_100 = float(w.y_of(w.x_0)), float(w.y_of(w.x_100))
+        for y in (_SOC_MARGIN, 1.0 - _SOC_MARGIN):
+            socs.append((y_0 - y) / (y_0 - y_100))
+        lows, highs = sorted(socs[:2]), sorted(socs[2:])
+        return max(lows[0], highs[0]), min(lows[1], highs[1])
+
+    def concentrations(self, soc: float) -> tuple[float, float]:
+        """Uniform (c_n, c_p) in mol/m3 at ``soc`` (PyBaMM's linear SOC; may lie outside 0..1)."""
+        lo, hi = self.soc_bounds
+        if not (np.isfinite(soc) and lo - 1e-9 <= soc <= hi + 1e-9):
+            raise SimulationError(f"SOC must be within {lo:.3f}..{hi:.3f} for this model, got {soc}")
+        w = self.window
+        x = w.x_0 + soc * (w.x_100 - w.x_0)
+        return x * w.c_max_mol_m3[0], float(w.y_of(x)) * w.c_max_mol_m3[1]
+
+    def soc_of(self, state: EngineState) -> float:
+        """SOC of a carried state: start SOC minus the charge drawn over the capacity."""
+        return state.soc_start - state.charge_ah / self.capacity_ah
+
+    # ------------------------------------------------------------------- runs
+    def run(self, start: float | EngineState, segments, temperature_k: float) -> EngineSegmentRun:
+        """Run ``segments`` = [(duration_s, pack_current_a), ...] at ``temperature_k`` from an SOC or a state.
+
+        A cell below its cut-off as soon as the first segment's current flows gives a run of one NaN
+        sample at 0 s with ``reached_cutoff`` set.
+        """
+        segs = np.asarray(segments, dtype=float).reshape(-1, 2)
+        duration_s, pack_a = segs[:, 0], segs[:, 1]
+        if segs.size == 0 or not (np.all(duration_s > 0) and np.all(np.isfinite(segs))):
+            raise SimulationError("segments must be finite (duration > 0 s, current) pairs")
+        if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
+            raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
+        cell_a = (pack_a - self.current_offset_a) / self.params.parallel
+        common = dict(temperature_k=float(temperature_k), backend=self.backend, keep_states=True)
+        if isinstance(start, EngineState):
+            runs = run_cells(self.model, self.modal, duration_s, cell_a, initial_state=start.particles, **common)
+            soc_start, charge0 = start.soc_start, start.charge_ah
+        else:
+            c_n, c_p = self.concentrations(float(start))
+            runs = run_cells(self.model, self.modal, duration_s, cell_a, c_n0_mol_m3=c_n, c_p0_mol_m3=c_p, **common)
+            soc_start, charge0 = float(start), 0.0
+        return self._samples(runs, duration_s, pack_a, cell_a, soc_start, charge0)
+
+    def _samples(self, runs, duration_s, pack_a, cell_a, soc_start: float, charge0: float) -> EngineSegmentRun:
+        end_s = float(runs.end_time_s[0])
+        last = int(runs.cutoff_step[0]) if runs.reached_cutoff[0] else duration_s.size - 1
+        times, amps, owners, ends = [], [], [], []
+        for k in range(last + 1):
+            t0, h = float(runs.step_start_s[k]), float(duration_s[k])
+            n = max(self.samples_per_segment, int(np.ceil(h / self.max_spacing_s)))
+            t = t0 + np.linspace(0.0, h, n + 1)
+            if runs.reached_cutoff[0] and k == last:
+                if end_s <= t0:  # below the cut-off as soon as this segment's current flows
+                    break
+                t = np.append(t[t < end_s], end_s)
+            times.append(t)
+            owners.append(np.full(t.size, k))
+            amps.append(np.full(t.size, pack_a[k]))
+            if not (runs.reached_cutoff[0] and k == last):
+                ends.append(sum(x.size for x in times) - 1)
+        state = EngineState(particles=(runs.final_state[0][0], runs.final_state[1][0]), soc_start=soc_start,
+                            charge_ah=charge0)
+        if not times:  # at the cut-off as soon as the first segment's current flows
+            return EngineSegmentRun(np.zeros(1), np.full(1, np.nan), np.zeros(1), [], True, 0.0, state)
+        time_s, owner = np.concatenate(times), np.concatenate(owners)
+        surfaces = self._surfaces(runs, duration_s, cell_a, time_s, owner)
+        batch = runs.extra["batch"]
+        v_cell = self.model.cell_voltage_v(surfaces[:, 0], surfaces[:, 1], cell_a[owner], batch.temperature_k[0],
+                                           batch.eps_n[0], batch.eps_p[0], batch.height_m[0])
+        pack_i = np.concatenate(amps)
+        v_pack = pack_voltage_v(v_cell, pack_i - self.current_offset_a, series=self.params.series,
+                                r_eq_ohm=self.r_eq_ohm)
+        done = min(int(runs.cutoff_step[0]), duration_s.size)
+        charge_as = float(np.sum(duration_s[:done] * pack_a[:done]))
+        if runs.reached_cutoff[0]:
+            charge_as += (end_s - float(runs.step_start_s[done])) * pack_a[done]
+        state = EngineState(particles=state.particles, soc_start=soc_start, charge_ah=charge0 + charge_as / 3600.0)
+        return EngineSegmentRun(time_s=time_s, pack_voltage_v=v_pack, pack_current_a=pack_i, segment_end_index=ends,
+                                reached_cutoff=bool(runs.reached_cutoff[0]), end_time_s=end_s, final_state=state)
+
+    def _surfaces(self, runs, duration_s, cell_a, time_s: np.ndarray, owner: np.ndarray) -> np.ndarray:
+        """Surface stoichiometries at ``time_s``, each inside (or at the end of) its own segment."""
+        surfaces = np.empty((time_s.size, 2))
+        tau = time_s - runs.step_start_s[owner]
+        at_end = tau >= duration_s[owner] - 1e-12
+        surfaces[at_end] = runs.extra["surfaces"][0, owner[at_end] + 1]
+        inside = ~at_end
+        if inside.any():
+            surfaces[inside] = states_at_times(runs, self.modal, duration_s, cell_a, time_s[inside])[0]
+        return surfaces

@@ -1,0 +1,78 @@
+"""Segment runs on the engine (EnginePack) against the predictor's PyBaMM pack model (PackRunner)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from battery_predictor.errors import SimulationError
+from battery_predictor.params import load_params
+from battery_predictor.simulation.engine.segments import EnginePack, EngineState
+
+REPO = Path(__file__).resolve().parents[2]
+#: PackRunner solves at rtol 1e-6 / atol 1e-8; the engine is exact for the same discretised model.
+PACK_TOLERANCE_V = 2e-3
+
+
+@pytest.fixture(scope="module")
+def ranger():
+    return load_params(REPO / "params" / "ranger_mini.yaml")
+
+
+@pytest.fixture(scope="module")
+def route_segments():
+    from battery_predictor.profiles.ranger import longest_route, route_profile
+
+    profile = route_profile(longest_route(80.0), mode="mean")
+    return list(zip(profile.duration_s, profile.current_a)) + [(60.0, 1.70)]
+
+
+def test_route_from_an_soc_matches_the_pybamm_pack_model(ranger, route_segments):
+    from battery_predictor.prediction.cell_runner import PackRunner
+
+    engine = EnginePack(ranger).run(0.3, route_segments, 298.15)
+    pybamm_run = PackRunner(ranger).run(0.3, route_segments, 298.15)
+    np.testing.assert_allclose(engine.time_s, pybamm_run.time_s, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(engine.pack_voltage_v, pybamm_run.pack_voltage_v, rtol=0, atol=PACK_TOLERANCE_V)
+    assert engine.segment_end_index == pybamm_run.segment_end_index
+    assert not engine.reached_cutoff and not pybamm_run.reached_cutoff
+
+
+def test_soc_window_and_capacity_match_the_pybamm_pack_model(ranger):
+    from battery_predictor.prediction.cell_runner import PackRunner
+
+    engine, runner = EnginePack(ranger), PackRunner(ranger)
+    assert engine.capacity_ah == pytest.approx(runner.capacity_ah, rel=1e-6)
+    np.testing.assert_allclose(engine.soc_bounds, runner.soc_bounds, rtol=1e-6)
+    np.testing.assert_allclose(engine.concentrations(0.4), runner.concentrations(0.4), rtol=1e-9)
+
+
+def test_a_continued_run_equals_one_run(ranger, route_segments):
+    pack = EnginePack(ranger)
+    whole = pack.run(0.5, route_segments, 298.15)
+    first = pack.run(0.5, route_segments[:40], 298.15)
+    rest = pack.run(first.final_state, route_segments[40:], 298.15)
+    np.testing.assert_allclose(rest.pack_voltage_v[-5:], whole.pack_voltage_v[-5:], rtol=0, atol=1e-9)
+    assert pack.soc_of(rest.final_state) == pytest.approx(pack.soc_of(whole.final_state), abs=1e-12)
+    assert pack.soc_of(whole.final_state) < 0.5
+
+
+def test_run_stops_at_the_cutoff_with_the_cutoff_voltage_last(ranger):
+    pack = EnginePack(ranger, samples_per_segment=2)
+    run = pack.run(0.1, [(600.0, 20.0)] * 6, 298.15)
+    assert run.reached_cutoff
+    assert run.time_s[-1] == pytest.approx(run.end_time_s)
+    cell_v = (run.pack_voltage_v[-1] + 20.0 * pack.r_eq_ohm) / ranger.series
+    assert cell_v == pytest.approx(pack.model.lower_cutoff_v, abs=1e-7)
+    assert isinstance(run.final_state, EngineState)
+    again = pack.run(run.final_state, [(60.0, 30.0)], 298.15)  # more current than the cut-off was reached at
+    assert again.reached_cutoff and again.end_time_s == 0.0 and np.isnan(again.pack_voltage_v[0])
+
+
+def test_refuses_an_soc_outside_the_model_and_an_uncovered_extension(ranger):
+    with pytest.raises(SimulationError, match="SOC must be within"):
+        EnginePack(ranger).run(1.9, [(60.0, 1.0)], 298.15)
+    with pytest.raises(SimulationError, match="cell_imbalance"):
+        EnginePack(ranger.with_values({}, extensions=("cell_imbalance",)))
