@@ -13,7 +13,7 @@ from battery_predictor.simulation.engine.segments import EnginePack, EngineState
 
 REPO = Path(__file__).resolve().parents[2]
 #: PackRunner solves at rtol 1e-6 / atol 1e-8; the engine is exact for the same discretised model.
-PACK_TOLERANCE_V = 2e-3
+PACK_TOLERANCE_V = 1e-4
 
 
 @pytest.fixture(scope="module")
