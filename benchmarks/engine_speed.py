@@ -35,6 +35,7 @@ sys.path.insert(0, str(REPO))
 
 from battery_predictor.errors import SimulationError  # noqa: E402
 from battery_predictor.params import load_params  # noqa: E402
+from battery_predictor.prediction.cell_runner import PackRunner  # noqa: E402
 from battery_predictor.profiles.load_profile import LoadProfile  # noqa: E402
 from battery_predictor.profiles.ranger import longest_route, route_profile  # noqa: E402
 from battery_predictor.profiles.temi import generate_usage_profile  # noqa: E402
@@ -45,6 +46,7 @@ from battery_predictor.simulation.engine.modal import modal_system  # noqa: E402
 from battery_predictor.simulation.engine.model import extract_linear_spm  # noqa: E402
 from battery_predictor.simulation.engine.pack import pack_voltage_v  # noqa: E402
 from battery_predictor.simulation.engine.run import ParameterSets, run_cells  # noqa: E402
+from battery_predictor.simulation.engine.segments import EnginePack  # noqa: E402
 from battery_predictor.simulation.engine.simulator import EngineSimulator  # noqa: E402
 from battery_predictor.simulation.fast import FastPackSimulator  # noqa: E402
 
@@ -137,6 +139,20 @@ def route_answer(model, modal, params, c_n0: float, c_p0: float, duration_s, cur
                                               temperature_k=298.15), max(repeat, 20))
     row(f"engine run, longest route ({steps.size} steps) + 60 s at 1.70 A, from a carried state", seconds,
         f"last voltage {params.series * runs.start_voltage_v[0, -1]:.3f} V (pack, before R_eq)")
+    segments = list(zip(steps, route.current_a))
+    pack, runner = EnginePack(params), PackRunner(params)
+    cases = (("EnginePack.run (route from SOC 0.3, samples in segments)", lambda: pack.run(0.3, segments, 298.15)),
+             ("PackRunner.run (the predictor's PyBaMM steps), same route", lambda: runner.run(0.3, segments, 298.15)))
+    for label, fn in cases:
+        fn()
+        times = []
+        for _ in range(max(repeat, 20)):
+            tic = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - tic)
+        row(label, float(np.median(times)), f"p95 {np.percentile(times, 95) * 1e3:.2f} ms")
+    diff = pack.run(0.3, segments, 298.15).pack_voltage_v - runner.run(0.3, segments, 298.15).pack_voltage_v
+    print(f"    EnginePack vs PackRunner on that route: max |dV| {np.abs(diff).max() * 1e3:.4f} mV")
 
 
 def row(label: str, seconds: float, note: str = "") -> None:
