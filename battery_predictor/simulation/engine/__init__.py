@@ -6,7 +6,13 @@
   coordinates (Numba kernel when installed, NumPy otherwise);
 - :mod:`~battery_predictor.simulation.engine.run`: cell runs with the voltage at every step and the
   exact cut-off time, batched over parameter sets and initial states;
-- :mod:`~battery_predictor.simulation.engine.pack`: the pack voltage (the one implementation).
+- :mod:`~battery_predictor.simulation.engine.state`: initial concentrations for an SOC or an
+  open-circuit voltage;
+- :mod:`~battery_predictor.simulation.engine.pack`: the pack voltage (the one implementation);
+- :mod:`~battery_predictor.simulation.engine.simulator`: ``EngineSimulator``, the pack-simulator
+  interface (and ``simulate_batch``) with a visible fallback;
+- :mod:`~battery_predictor.simulation.engine.segments`: ``EnginePack``, segment runs from an SOC
+  or a carried state for predictions.
 """
 
 from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
