@@ -76,3 +76,23 @@ def test_refuses_an_soc_outside_the_model_and_an_uncovered_extension(ranger):
         EnginePack(ranger).run(1.9, [(60.0, 1.0)], 298.15)
     with pytest.raises(SimulationError, match="cell_imbalance"):
         EnginePack(ranger.with_values({}, extensions=("cell_imbalance",)))
+
+
+def test_weak_group_matches_the_pybamm_pack_model(ranger, route_segments):
+    from battery_predictor.diagnosis.extensions_impl import weak_group_fraction
+    from battery_predictor.prediction.cell_runner import PackRunner
+
+    params = ranger.with_values({"Weak series group capacity fraction": 0.8}, extensions=("cell_imbalance",))
+    pack = EnginePack(params, weak_fraction=weak_group_fraction(params))
+    runner = PackRunner(params)
+    engine, pybamm_run = pack.run(0.3, route_segments, 298.15), runner.run(0.3, route_segments, 298.15)
+    np.testing.assert_allclose(engine.pack_voltage_v, pybamm_run.pack_voltage_v, rtol=0, atol=PACK_TOLERANCE_V)
+    assert pack.capacity_ah == pytest.approx(runner.capacity_ah, rel=1e-6)
+    plain = EnginePack(ranger).run(0.3, route_segments, 298.15)
+    assert engine.pack_voltage_v[-1] < plain.pack_voltage_v[-1] - 0.003  # the weak group sags more
+    low = pack.run(0.12, [(600.0, 20.0)] * 4, 298.15)
+    low_pybamm = runner.run(0.12, [(600.0, 20.0)] * 4, 298.15)
+    assert low.reached_cutoff and low_pybamm.reached_cutoff
+    assert low.end_time_s == pytest.approx(low_pybamm.end_time_s, rel=1e-4)
+    rest = pack.run(pack.run(0.3, route_segments[:40], 298.15).final_state, route_segments[40:], 298.15)
+    np.testing.assert_allclose(rest.pack_voltage_v[-3:], engine.pack_voltage_v[-3:], rtol=0, atol=1e-9)

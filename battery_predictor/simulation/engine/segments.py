@@ -6,6 +6,11 @@ pack of identical cells (the cell carries ``I_pack / parallel``; :func:`pack_vol
 PyBaMM's linear SOC between the 0 % and 100 % open-circuit voltages) or from the particle state a
 previous run ended in, and reports the pack voltage at samples inside every segment (each
 segment's end sampled under the segment's own current) until the cell's lower cut-off.
+
+A weak series group (extension ``cell_imbalance``) is a second cell whose electrode height is the
+weak fraction of the normal one's (a parameter set of the same extraction, no rebuild); both start
+at the same SOC, the pack voltage is ``(series - 1) V_normal + V_weak - I R_eq`` and the run ends
+when either cell reaches the cut-off.
 """
 
 from __future__ import annotations
@@ -16,10 +21,10 @@ import numpy as np
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.cell_setup import prepared_parameter_values
-from battery_predictor.simulation.engine.modal import modal_system
+from battery_predictor.simulation.engine.modal import modal_system, step_coefficients
 from battery_predictor.simulation.engine.model import extract_linear_spm
 from battery_predictor.simulation.engine.pack import pack_voltage_v
-from battery_predictor.simulation.engine.run import run_cells, states_at_times
+from battery_predictor.simulation.engine.run import ParameterSets, run_cells, states_at_times
 from battery_predictor.simulation.engine.simulator import CELL_MODEL_EXTENSIONS
 from battery_predictor.simulation.engine.state import StoichiometryWindow
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
@@ -36,6 +41,8 @@ class EngineState:
     ----------
     particles : tuple of numpy.ndarray
         Negative and positive particle states (stoichiometry profiles).
+    weak_particles : tuple of numpy.ndarray or None
+        The weak group's particle states (extension ``cell_imbalance``), else None.
     soc_start : float
         SOC the first run started from.
     charge_ah : float
@@ -45,6 +52,7 @@ class EngineState:
     particles: tuple[np.ndarray, np.ndarray]
     soc_start: float
     charge_ah: float
+    weak_particles: tuple[np.ndarray, np.ndarray] | None = None
 
 
 @dataclass(frozen=True)
@@ -87,6 +95,9 @@ class EnginePack:
         The pack; extensions outside the engine's cell-model ones raise.
     current_offset_a : float
         Pack current-sensor offset (A): the cells carry ``current - offset``.
+    weak_fraction : float or None
+        Capacity fraction of the weak series group (1: none); required when the params activate
+        ``cell_imbalance`` (its value lives with the extension, above this layer).
     samples_per_segment : int
         Minimum samples inside each segment (its end always included).
     max_spacing_s : float
@@ -95,11 +106,17 @@ class EnginePack:
         Engine backend (``"auto"``, ``"numba"``, ``"numpy"``).
     """
 
-    def __init__(self, params, *, current_offset_a: float = 0.0, samples_per_segment: int = 4,
-                 max_spacing_s: float = 30.0, backend: str = "auto") -> None:
-        outside = sorted(set(params.extensions) - set(CELL_MODEL_EXTENSIONS))
+    def __init__(self, params, *, current_offset_a: float = 0.0, weak_fraction: float | None = None,
+                 samples_per_segment: int = 4, max_spacing_s: float = 30.0, backend: str = "auto") -> None:
+        outside = sorted(set(params.extensions) - set(CELL_MODEL_EXTENSIONS) - {"cell_imbalance"})
         if params.model != "SPM" or outside:
             raise SimulationError(f"the engine does not cover model {params.model} with extensions {outside}")
+        if "cell_imbalance" in params.extensions and weak_fraction is None:
+            raise SimulationError("cell_imbalance is active: pass the weak group's capacity fraction (weak_fraction)")
+        self.weak_fraction = 1.0 if weak_fraction is None or params.series < 2 else float(weak_fraction)
+        if not 0.0 < self.weak_fraction <= 10.0:
+            raise SimulationError(f"weak group capacity fraction must be > 0, got {weak_fraction}")
+        self._sets = ParameterSets(height=np.array([1.0, self.weak_fraction])) if self.weak_fraction != 1.0 else None
         self.params = params
         self.current_offset_a = float(current_offset_a)
         self.samples_per_segment = int(samples_per_segment)
@@ -113,9 +130,9 @@ class EnginePack:
         self.r_eq_ohm = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
                                                           p["r_t_ohm"])
         volume_m3 = float(pv["Electrode height [m]"]) * float(pv["Electrode width [m]"])
-        #: Pack capacity between 0 % and 100 % SOC in Ah (negative electrode window).
+        #: Pack capacity between 0 % and 100 % SOC in Ah (negative electrode window; the group that empties first).
         self.capacity_ah = (abs(self.window.x_100 - self.window.x_0) * self.window.n_n * volume_m3 * 96485.33212
-                            / 3600.0 * params.parallel)
+                            / 3600.0 * params.parallel * min(1.0, self.weak_fraction))
 
     # ------------------------------------------------------------------ state
     @property
@@ -158,9 +175,14 @@ class EnginePack:
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
             raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
         cell_a = (pack_a - self.current_offset_a) / self.params.parallel
-        common = dict(temperature_k=float(temperature_k), backend=self.backend, keep_states=True)
+        common = dict(temperature_k=float(temperature_k), backend=self.backend, keep_states=True, sets=self._sets)
         if isinstance(start, EngineState):
-            runs = run_cells(self.model, self.modal, duration_s, cell_a, initial_state=start.particles, **common)
+            particles = start.particles
+            if self._sets is not None:
+                if start.weak_particles is None:
+                    raise SimulationError("the state to continue from has no weak group (made without cell_imbalance?)")
+                particles = tuple(np.vstack([a, b]) for a, b in zip(start.particles, start.weak_particles))
+            runs = run_cells(self.model, self.modal, duration_s, cell_a, initial_state=particles, **common)
             soc_start, charge0 = start.soc_start, start.charge_ah
         else:
             c_n, c_p = self.concentrations(float(start))
@@ -169,49 +191,72 @@ class EnginePack:
         return self._samples(runs, duration_s, pack_a, cell_a, soc_start, charge0)
 
     def _samples(self, runs, duration_s, pack_a, cell_a, soc_start: float, charge0: float) -> EngineSegmentRun:
-        end_s = float(runs.end_time_s[0])
-        last = int(runs.cutoff_step[0]) if runs.reached_cutoff[0] else duration_s.size - 1
+        first = int(np.argmin(runs.end_time_s))  # the group that reaches its cut-off first ends the pack's run
+        end_s = float(runs.end_time_s[first])
+        reached = bool(runs.reached_cutoff[first])
+        last = int(runs.cutoff_step[first]) if reached else duration_s.size - 1
         times, amps, owners, ends = [], [], [], []
         for k in range(last + 1):
             t0, h = float(runs.step_start_s[k]), float(duration_s[k])
             n = max(self.samples_per_segment, int(np.ceil(h / self.max_spacing_s)))
             t = t0 + np.linspace(0.0, h, n + 1)
-            if runs.reached_cutoff[0] and k == last:
+            if reached and k == last:
                 if end_s <= t0:  # below the cut-off as soon as this segment's current flows
                     break
                 t = np.append(t[t < end_s], end_s)
             times.append(t)
             owners.append(np.full(t.size, k))
             amps.append(np.full(t.size, pack_a[k]))
-            if not (runs.reached_cutoff[0] and k == last):
+            if not (reached and k == last):
                 ends.append(sum(x.size for x in times) - 1)
-        state = EngineState(particles=(runs.final_state[0][0], runs.final_state[1][0]), soc_start=soc_start,
-                            charge_ah=charge0)
+        state = self._state_at(runs, duration_s, cell_a, first, end_s, soc_start, charge0)
         if not times:  # at the cut-off as soon as the first segment's current flows
             return EngineSegmentRun(np.zeros(1), np.full(1, np.nan), np.zeros(1), [], True, 0.0, state)
         time_s, owner = np.concatenate(times), np.concatenate(owners)
-        surfaces = self._surfaces(runs, duration_s, cell_a, time_s, owner)
         batch = runs.extra["batch"]
-        v_cell = self.model.cell_voltage_v(surfaces[:, 0], surfaces[:, 1], cell_a[owner], batch.temperature_k[0],
-                                           batch.eps_n[0], batch.eps_p[0], batch.height_m[0])
+        v_cells = []
+        for s in range(runs.end_time_s.size):
+            surfaces = self._surfaces(runs, s, duration_s, cell_a, time_s, owner)
+            v_cells.append(self.model.cell_voltage_v(surfaces[:, 0], surfaces[:, 1], cell_a[owner],
+                                                     batch.temperature_k[s], batch.eps_n[s], batch.eps_p[s],
+                                                     batch.height_m[s]))
         pack_i = np.concatenate(amps)
-        v_pack = pack_voltage_v(v_cell, pack_i - self.current_offset_a, series=self.params.series,
-                                r_eq_ohm=self.r_eq_ohm)
-        done = min(int(runs.cutoff_step[0]), duration_s.size)
+        v_pack = pack_voltage_v(v_cells[0], pack_i - self.current_offset_a, series=self.params.series,
+                                r_eq_ohm=self.r_eq_ohm, weak_cell_voltage_v=v_cells[1] if len(v_cells) > 1 else None)
+        done = last if reached else duration_s.size
         charge_as = float(np.sum(duration_s[:done] * pack_a[:done]))
-        if runs.reached_cutoff[0]:
+        if reached:
             charge_as += (end_s - float(runs.step_start_s[done])) * pack_a[done]
-        state = EngineState(particles=state.particles, soc_start=soc_start, charge_ah=charge0 + charge_as / 3600.0)
+        state = EngineState(particles=state.particles, soc_start=soc_start, charge_ah=charge0 + charge_as / 3600.0,
+                            weak_particles=state.weak_particles)
         return EngineSegmentRun(time_s=time_s, pack_voltage_v=v_pack, pack_current_a=pack_i, segment_end_index=ends,
-                                reached_cutoff=bool(runs.reached_cutoff[0]), end_time_s=end_s, final_state=state)
+                                reached_cutoff=reached, end_time_s=end_s, final_state=state)
 
-    def _surfaces(self, runs, duration_s, cell_a, time_s: np.ndarray, owner: np.ndarray) -> np.ndarray:
-        """Surface stoichiometries at ``time_s``, each inside (or at the end of) its own segment."""
+    def _surfaces(self, runs, set_index: int, duration_s, cell_a, time_s: np.ndarray, owner: np.ndarray) -> np.ndarray:
+        """Surface stoichiometries of one set at ``time_s``, each inside (or at the end of) its own segment."""
         surfaces = np.empty((time_s.size, 2))
         tau = time_s - runs.step_start_s[owner]
         at_end = tau >= duration_s[owner] - 1e-12
-        surfaces[at_end] = runs.extra["surfaces"][0, owner[at_end] + 1]
+        surfaces[at_end] = runs.extra["surfaces"][set_index, owner[at_end] + 1]
         inside = ~at_end
         if inside.any():
-            surfaces[inside] = states_at_times(runs, self.modal, duration_s, cell_a, time_s[inside])[0]
+            surfaces[inside] = states_at_times(runs, self.modal, duration_s, cell_a, time_s[inside])[set_index]
         return surfaces
+
+    def _state_at(self, runs, duration_s, cell_a, first: int, end_s: float, soc_start: float,
+                  charge0: float) -> EngineState:
+        """Particle states of every group at ``end_s`` (the first group's end: its own final state)."""
+        particles = []
+        for s in range(runs.end_time_s.size):
+            if s == first:
+                particles.append((runs.final_state[0][s], runs.final_state[1][s]))
+                continue
+            step = min(int(np.searchsorted(runs.step_start_s, end_s, side="right")) - 1, duration_s.size - 1)
+            tau = end_s - float(runs.step_start_s[step])
+            lam, drive = runs.extra["lam"][s], runs.extra["drive"][s]
+            decay, phi = step_coefficients(lam, tau)
+            z = decay * runs.extra["checkpoints"][s, step] + phi * drive * cell_a[step]
+            y_n, y_p = self.modal.block_states(z)
+            particles.append((y_n[0], y_p[0]))
+        return EngineState(particles=particles[0], soc_start=soc_start, charge_ah=charge0,
+                           weak_particles=particles[1] if len(particles) > 1 else None)
