@@ -85,3 +85,20 @@ def test_engine_matches_pybamm_with_a_contact_resistance(temi_params):
     assert "engine_fallback" not in engine.extra
     assert rms_v <= RMS_LIMIT_V
     assert cutoff_fraction <= CUTOFF_LIMIT_FRACTION
+
+
+def test_engine_matches_pybamm_with_temperature_dependent_diffusivities_away_from_the_build(temi_params):
+    from dataclasses import replace
+
+    from battery_predictor.profiles.temi import generate_usage_profile
+
+    params = replace(temi_params, base_parameter_set="NCA_Kim2011", fitted={}, manual={})
+    load = StepLoad.from_profile(generate_usage_profile(seed=3, max_duration_s=1800)).resample(5.0)
+    request = SimulationRequest(load=load, initial_soc=0.5, ambient_temperature_k=283.15,
+                                output_time_s=_report_times(load))
+    engine = EngineSimulator(fallback=None).simulate(params, request)
+    reference = FastPackSimulator(rtol=1e-10, atol=1e-10).simulate(params, request)
+    v_cell = np.asarray(reference.extra["solution"]["Terminal voltage [V]"](engine.time_s), dtype=float)
+    v_ref = pack_voltage_v(v_cell, load.current_at(engine.time_s), series=params.series,
+                           r_eq_ohm=reference.extra["r_eq_ohm"])
+    assert float(np.sqrt(np.mean((engine.pack_voltage_v - v_ref) ** 2))) <= RMS_LIMIT_V

@@ -168,11 +168,16 @@ def test_parameter_set_factors_match_a_pybamm_rebuild(temi_params, temi_spm, cha
     np.testing.assert_allclose(scaled.start_voltage_v, direct.start_voltage_v, rtol=0, atol=1e-9)
 
 
-@pytest.mark.parametrize("extension, message", [("temperature", "not a constant"),
-                                                ("electrolyte_transport", "other than through surface values")])
-def test_extraction_refuses_a_model_that_is_not_linear_particles_and_a_voltage(temi_params, extension, message):
-    with pytest.raises(SimulationError, match=message):
-        extract_linear_spm(temi_params.with_values({}, extensions=(extension,)))
+def test_extraction_refuses_a_voltage_that_depends_on_more_than_the_particle_surfaces(temi_params):
+    with pytest.raises(SimulationError, match="other than through surface values"):
+        extract_linear_spm(temi_params.with_values({}, extensions=("electrolyte_transport",)))
+
+
+def test_extraction_refuses_a_concentration_dependent_diffusivity(temi_params):
+    from dataclasses import replace
+
+    with pytest.raises(SimulationError, match="not linear in the state"):
+        extract_linear_spm(replace(temi_params, base_parameter_set="Ecker2015", fitted={}, manual={}))
 
 
 def test_contact_resistance_option_reaches_the_extracted_voltage(temi_params, temi_spm):

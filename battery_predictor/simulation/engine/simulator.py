@@ -7,12 +7,12 @@ by the engine. Cells that differ from a built one only in particle radii, diffus
 electrode thicknesses, active material volume fractions and electrode height reuse its
 extraction (scaling, no PyBaMM rebuild).
 
-What the engine does not cover (models other than the SPM, the extensions outside
-:data:`CELL_MODEL_EXTENSIONS`, model options or states that the voltage depends on beyond the
-particle surfaces, concentration- or temperature-dependent diffusivities, per-cell values) is
-simulated by the fallback simulator
-(the fast one by default); the result says so in ``extra["engine_fallback"]`` and a warning is
-logged, so a fallback is never silent.
+Diffusivities that depend on the temperature only (PyBaMM functions, e.g. NCA_Kim2011) are taken at
+the request's temperature. What the engine does not cover (models other than the SPM, the
+extensions outside :data:`CELL_MODEL_EXTENSIONS`, model options or states that the voltage
+depends on beyond the particle surfaces, concentration-dependent diffusivities, per-cell values)
+is simulated by the fallback simulator (the fast one by default); the result says so in
+``extra["engine_fallback"]`` and a warning is logged, so a fallback is never silent.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from battery_predictor.simulation.engine.model import (
     HEIGHT,
     LinearSpm,
     c_max_scaling_holds,
+    diffusivity_m2_s,
     extract_linear_spm,
 )
 from battery_predictor.simulation.engine.pack import pack_voltage_v
@@ -91,6 +92,7 @@ SCALABLE_KEYS = {
     EPS_P: "fraction_p",
     HEIGHT: "height",
 }
+DIFFUSIVITY_KEYS = ("Negative particle diffusivity [m2.s-1]", "Positive particle diffusivity [m2.s-1]")
 #: The maximum concentrations, scalable where :func:`c_max_scaling_holds`.
 C_MAX_KEYS = {C_MAX_N: "c_max_n", C_MAX_P: "c_max_p"}
 _STATE_KEYS = frozenset({C_N0, C_P0})
@@ -136,7 +138,7 @@ class EngineSimulator:
         reason = self.unsupported_reason(params, request)
         if reason is None:
             try:
-                model, modal, sets = self._model(params)
+                model, modal, sets = self._model(params, self._temperature_k(params, request))
             except SimulationError as exc:
                 reason = str(exc)
         if reason is not None:
@@ -165,7 +167,7 @@ class EngineSimulator:
         reason = self.unsupported_reason(params, request)
         if reason is not None:
             raise SimulationError(f"engine: {reason}")
-        model, modal, base = self._model(params)
+        model, modal, base = self._model(params, self._temperature_k(params, request))
         n_sets = max((np.size(v) for v in values.values()), default=1)
         factors = self._batch_factors(params, model, base, values)
         c_n0, c_p0 = self._batch_concentrations(params, request, model, values, n_sets)
@@ -233,8 +235,16 @@ class EngineSimulator:
             self._c_max_rule[structure] = c_max_scaling_holds(params)
         return {**SCALABLE_KEYS, **C_MAX_KEYS} if self._c_max_rule[structure] else SCALABLE_KEYS
 
-    def _model(self, params) -> tuple[LinearSpm, ModalSystem, ParameterSets]:
-        """The extraction for ``params`` (cached on everything but scalable values) and its scale factors."""
+    @staticmethod
+    def _temperature_k(params, request: SimulationRequest) -> float:
+        return float(request.ambient_temperature_k or params.ambient_temperature_k)
+
+    def _model(self, params, temperature_k: float) -> tuple[LinearSpm, ModalSystem, ParameterSets]:
+        """The extraction for ``params`` (cached on everything but scalable values) and its scale factors.
+
+        Diffusivities that are functions of the temperature are taken at ``temperature_k`` (the
+        isothermal cell's), as a factor on the extraction's.
+        """
         values = params.cell_values
         scalable = self._scalable_keys(params)
         fixed = tuple(sorted((k, repr(v)) for k, v in values.items() if k not in scalable and k not in _STATE_KEYS))
@@ -252,9 +262,12 @@ class EngineSimulator:
         pv = self._parameter_values(params)
         factors = {}
         for pybamm_key, field_name in scalable.items():
-            value = pv[pybamm_key]
-            if not isinstance(value, (int, float)):
-                raise SimulationError(f"'{pybamm_key}' is not a constant; the engine needs a constant")
+            if pybamm_key in DIFFUSIVITY_KEYS:
+                value = diffusivity_m2_s(pv, pybamm_key, temperature_k)
+            else:
+                value = pv[pybamm_key]
+                if not isinstance(value, (int, float)):
+                    raise SimulationError(f"'{pybamm_key}' is not a constant; the engine needs a constant")
             factors[field_name] = float(value) / model.built_values[pybamm_key]
         return model, modal, ParameterSets(**factors)
 
