@@ -96,3 +96,20 @@ def test_weak_group_matches_the_pybamm_pack_model(ranger, route_segments):
     assert low.end_time_s == pytest.approx(low_pybamm.end_time_s, rel=1e-4)
     rest = pack.run(pack.run(0.3, route_segments[:40], 298.15).final_state, route_segments[40:], 298.15)
     np.testing.assert_allclose(rest.pack_voltage_v[-3:], engine.pack_voltage_v[-3:], rtol=0, atol=1e-9)
+
+
+def test_temperature_extension_matches_the_pybamm_pack_model_in_the_cold(ranger, route_segments):
+    from battery_predictor.diagnosis.extensions_impl import EA_SERIES, extension_value
+    from battery_predictor.prediction.cell_runner import PackRunner
+
+    params = ranger.with_values({"Negative particle diffusivity activation energy [J.mol-1]": 30000.0,
+                                 "Positive particle diffusivity activation energy [J.mol-1]": 25000.0,
+                                 EA_SERIES: 20000.0}, extensions=("temperature",))
+    pack = EnginePack(params, series_activation_j_mol=extension_value(params, EA_SERIES))
+    engine = pack.run(0.3, route_segments, 278.15)
+    pybamm_run = PackRunner(params).run(0.3, route_segments, 278.15)
+    np.testing.assert_allclose(engine.pack_voltage_v, pybamm_run.pack_voltage_v, rtol=0, atol=PACK_TOLERANCE_V)
+    warm = pack.run(0.3, route_segments, 298.15)
+    assert engine.pack_voltage_v[-1] < warm.pack_voltage_v[-1] - 0.01
+    with pytest.raises(SimulationError, match="series_activation_j_mol"):
+        EnginePack(params)

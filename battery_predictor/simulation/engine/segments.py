@@ -22,10 +22,10 @@ import numpy as np
 from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.cell_setup import prepared_parameter_values
 from battery_predictor.simulation.engine.modal import modal_system, step_coefficients
-from battery_predictor.simulation.engine.model import extract_linear_spm
-from battery_predictor.simulation.engine.pack import pack_voltage_v
+from battery_predictor.simulation.engine.model import diffusivity_m2_s, extract_linear_spm
+from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
 from battery_predictor.simulation.engine.run import ParameterSets, run_cells, states_at_times
-from battery_predictor.simulation.engine.simulator import CELL_MODEL_EXTENSIONS
+from battery_predictor.simulation.engine.simulator import CELL_MODEL_EXTENSIONS, DIFFUSIVITY_KEYS
 from battery_predictor.simulation.engine.state import StoichiometryWindow
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
@@ -98,6 +98,9 @@ class EnginePack:
     weak_fraction : float or None
         Capacity fraction of the weak series group (1: none); required when the params activate
         ``cell_imbalance`` (its value lives with the extension, above this layer).
+    series_activation_j_mol : float or None
+        Arrhenius activation energy of ``R_eq`` (J/mol); required when the params activate
+        ``temperature`` (the particle diffusivities' own temperature dependence comes from PyBaMM).
     samples_per_segment : int
         Minimum samples inside each segment (its end always included).
     max_spacing_s : float
@@ -107,16 +110,21 @@ class EnginePack:
     """
 
     def __init__(self, params, *, current_offset_a: float = 0.0, weak_fraction: float | None = None,
-                 samples_per_segment: int = 4, max_spacing_s: float = 30.0, backend: str = "auto") -> None:
-        outside = sorted(set(params.extensions) - set(CELL_MODEL_EXTENSIONS) - {"cell_imbalance"})
+                 series_activation_j_mol: float | None = None, samples_per_segment: int = 4,
+                 max_spacing_s: float = 30.0, backend: str = "auto") -> None:
+        outside = sorted(set(params.extensions) - set(CELL_MODEL_EXTENSIONS) - {"cell_imbalance", "temperature"})
         if params.model != "SPM" or outside:
             raise SimulationError(f"the engine does not cover model {params.model} with extensions {outside}")
         if "cell_imbalance" in params.extensions and weak_fraction is None:
             raise SimulationError("cell_imbalance is active: pass the weak group's capacity fraction (weak_fraction)")
+        if "temperature" in params.extensions and series_activation_j_mol is None:
+            raise SimulationError("temperature is active: pass the series resistance's activation energy "
+                                  "(series_activation_j_mol)")
+        self.series_activation_j_mol = float(series_activation_j_mol or 0.0)
         self.weak_fraction = 1.0 if weak_fraction is None or params.series < 2 else float(weak_fraction)
         if not 0.0 < self.weak_fraction <= 10.0:
             raise SimulationError(f"weak group capacity fraction must be > 0, got {weak_fraction}")
-        self._sets = ParameterSets(height=np.array([1.0, self.weak_fraction])) if self.weak_fraction != 1.0 else None
+        self._heights = np.array([1.0, self.weak_fraction]) if self.weak_fraction != 1.0 else np.array([1.0])
         self.params = params
         self.current_offset_a = float(current_offset_a)
         self.samples_per_segment = int(samples_per_segment)
@@ -125,6 +133,8 @@ class EnginePack:
         self.model = extract_linear_spm(params)
         self.modal = modal_system(self.model)
         pv = prepared_parameter_values(params)
+        self._pv = pv
+        self._diffusivity_factors: dict[float, tuple[float, float]] = {}
         self.window = StoichiometryWindow(self.model, pv)
         p = params.interconnect
         self.r_eq_ohm = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
@@ -175,10 +185,12 @@ class EnginePack:
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
             raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
         cell_a = (pack_a - self.current_offset_a) / self.params.parallel
-        common = dict(temperature_k=float(temperature_k), backend=self.backend, keep_states=True, sets=self._sets)
+        f_n, f_p = self._diffusivity_factors_at(float(temperature_k))
+        sets = ParameterSets(height=self._heights, diffusivity_n=f_n, diffusivity_p=f_p)
+        common = dict(temperature_k=float(temperature_k), backend=self.backend, keep_states=True, sets=sets)
         if isinstance(start, EngineState):
             particles = start.particles
-            if self._sets is not None:
+            if self._heights.size > 1:
                 if start.weak_particles is None:
                     raise SimulationError("the state to continue from has no weak group (made without cell_imbalance?)")
                 particles = tuple(np.vstack([a, b]) for a, b in zip(start.particles, start.weak_particles))
@@ -221,8 +233,9 @@ class EnginePack:
                                                      batch.temperature_k[s], batch.eps_n[s], batch.eps_p[s],
                                                      batch.height_m[s]))
         pack_i = np.concatenate(amps)
+        r_eq = self.r_eq_ohm * float(series_resistance_factor(batch.temperature_k[0], self.series_activation_j_mol))
         v_pack = pack_voltage_v(v_cells[0], pack_i - self.current_offset_a, series=self.params.series,
-                                r_eq_ohm=self.r_eq_ohm, weak_cell_voltage_v=v_cells[1] if len(v_cells) > 1 else None)
+                                r_eq_ohm=r_eq, weak_cell_voltage_v=v_cells[1] if len(v_cells) > 1 else None)
         done = last if reached else duration_s.size
         charge_as = float(np.sum(duration_s[:done] * pack_a[:done]))
         if reached:
@@ -231,6 +244,16 @@ class EnginePack:
                             weak_particles=state.weak_particles)
         return EngineSegmentRun(time_s=time_s, pack_voltage_v=v_pack, pack_current_a=pack_i, segment_end_index=ends,
                                 reached_cutoff=reached, end_time_s=end_s, final_state=state)
+
+    def _diffusivity_factors_at(self, temperature_k: float) -> tuple[float, float]:
+        """Particle diffusivities at ``temperature_k`` over the extraction's (1 for constants)."""
+        if temperature_k not in self._diffusivity_factors:
+            if len(self._diffusivity_factors) > 64:
+                self._diffusivity_factors.clear()
+            f_n, f_p = (diffusivity_m2_s(self._pv, key, temperature_k) / self.model.built_values[key]
+                        for key in DIFFUSIVITY_KEYS)
+            self._diffusivity_factors[temperature_k] = (f_n, f_p)
+        return self._diffusivity_factors[temperature_k]
 
     def _surfaces(self, runs, set_index: int, duration_s, cell_a, time_s: np.ndarray, owner: np.ndarray) -> np.ndarray:
         """Surface stoichiometries of one set at ``time_s``, each inside (or at the end of) its own segment."""
