@@ -170,7 +170,7 @@ def _built_simulation(params):
                 raise SimulationError(f"{params.source}: '{key}' is not a constant; the engine needs a constant")
             built[key] = float(value)
         key = f"{electrode} particle diffusivity [m2.s-1]"
-        # a diffusivity that depends on the stoichiometry fails the linearity check below
+        # a diffusivity that depends on the stoichiometry fails the extraction's linearity check
         built[key] = diffusivity_m2_s(pv, key, built[T_AMB])
     built[T_INIT] = built[T_AMB]
     built[CURRENT] = 0.0
