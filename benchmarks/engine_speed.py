@@ -124,6 +124,14 @@ def fit_calls(engine: EngineSimulator, params, request: SimulationRequest, n_cal
     row(f"engine simulator, {n_calls} calls with {len(names)} fit parameters +-20 %", seconds,
         f"{seconds / n_calls * 1e3:.2f} ms per call, {failed} failed, "
         f"{engine.extractions - extractions} new extractions")
+    cell_names = [name for name in names if name in params.cell_values]
+    values = {name: float(base[name]) * rng.uniform(0.8, 1.2, n_calls) for name in cell_names}
+    engine.simulate_batch(params, request, values)
+    tic = time.perf_counter()
+    batch = engine.simulate_batch(params, request, values)
+    seconds = time.perf_counter() - tic
+    row(f"engine simulate_batch, {n_calls} variants of the {len(cell_names)} cell fit parameters", seconds,
+        f"engine's own {batch.engine_seconds * 1e3:.1f} ms, {int(batch.reached_cutoff.sum())} reach the cut-off")
 
 
 def route_answer(model, modal, params, c_n0: float, c_p0: float, duration_s, current_a, repeat: int) -> None:
