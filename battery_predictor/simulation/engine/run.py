@@ -2,8 +2,10 @@
 
 The particle states at every step boundary come from the exact modal recurrence
 (:mod:`battery_predictor.simulation.engine.modal`); the cell voltage is PyBaMM's voltage
-expression evaluated on all boundaries at once, just after each step start (under the step's
-current, right-continuous) and at each step end (under the same current). The run ends at the
+expression, just after each step start (under the step's current, right-continuous) and at each
+step end (under the same current). The fused kernel (:mod:`~battery_predictor.simulation.engine.kernel`)
+does both in one compiled loop per set; the two-pass path (NumPy, or when the states are kept for
+reports inside steps) evaluates the voltage on all boundaries at once afterwards. The run ends at the
 first step whose start or end voltage is below the lower cut-off: at the step start when the
 start voltage is, else at the root of the voltage inside the step (regula falsi on the exact
 within-step solution), which is where PyBaMM's ``Minimum voltage`` event stops its solver. A
@@ -42,7 +44,8 @@ class ParameterSets:
     """Cells that differ from the built cell by factors on geometric and transport values.
 
     Every attribute is a factor (1 = the built value), a float or an array of shape (n_sets,).
-    None of them needs a PyBaMM rebuild (see :mod:`battery_predictor.simulation.engine.model`).
+    None of them needs a PyBaMM rebuild (see :mod:`battery_predictor.simulation.engine.model`); the
+    maximum concentrations only where :func:`~battery_predictor.simulation.engine.model.c_max_scaling_holds`.
     """
 
     radius_n: object = 1.0

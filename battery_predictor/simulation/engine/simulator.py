@@ -4,8 +4,9 @@ A pack of identical cells as in the fast simulator (the cell carries ``I_pack / 
 pack voltage is :func:`~battery_predictor.simulation.engine.pack.pack_voltage_v`, the cell's lower
 cut-off ends the run, voltages are right-continuous at the report times), with the cell stepped
 by the engine. Cells that differ from a built one only in particle radii, diffusivities,
-electrode thicknesses, active material volume fractions and electrode height reuse its
-extraction (scaling, no PyBaMM rebuild).
+electrode thicknesses, active material volume fractions, electrode height, initial concentrations
+and (where a PyBaMM rebuild confirms the rule once per model structure) maximum concentrations
+reuse its extraction (scaling, no PyBaMM rebuild).
 
 Diffusivities that depend on the temperature only (PyBaMM functions, e.g. NCA_Kim2011) are taken at
 the request's temperature. What the engine does not cover (models other than the SPM, the
