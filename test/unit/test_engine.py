@@ -413,3 +413,25 @@ def test_simulator_reports_step_starts_from_the_fused_run_as_from_kept_states(te
     n = on_starts.time_s.size
     np.testing.assert_array_equal(with_mids.time_s[:n], on_starts.time_s)
     np.testing.assert_allclose(on_starts.pack_voltage_v, with_mids.pack_voltage_v[:n], rtol=0, atol=1e-9)
+
+
+def test_a_kernel_that_does_not_compile_falls_back_to_the_two_pass_path(temi_params, caplog):
+    numba = pytest.importorskip("numba")
+    from battery_predictor.simulation.engine import run as run_module
+
+    model = extract_linear_spm(temi_params)
+    modal = modal_system(model)
+
+    def broken(*args):
+        raise numba.core.errors.TypingError("no typing for this expression")
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(run_module, "fused_kernel", lambda *args, **kwargs: broken)
+        with caplog.at_level("WARNING"):
+            runs = run_cells(model, modal, np.full(50, 5.0), np.full(50, 2.0), c_n0_mol_m3=model.built_values[C_N0],
+                             c_p0_mol_m3=model.built_values[C_P0], temperature_k=298.15)
+    assert runs.extra["backend"] == "numba"
+    assert "does not compile" in caplog.text
+    from battery_predictor.simulation.engine.kernel import fused_kernel
+
+    assert fused_kernel(model) is None

@@ -112,6 +112,11 @@ def fused_kernel(model: LinearSpm, *, parallel: bool = False):
     return _CACHE[key]
 
 
+def forget_kernel(model: LinearSpm) -> None:
+    """Use no fused kernel for ``model`` from now on (its printed voltage did not compile)."""
+    _SOURCES[model] = ""
+
+
 def _compile(numba, source: str, parallel: bool):
     namespace: dict = {"math": math}
     exec(compile(source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - code printed by PyBaMM from the model

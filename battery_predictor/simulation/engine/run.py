@@ -14,12 +14,13 @@ voltage that dips below the cut-off and recovers within one constant-current ste
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from battery_predictor.errors import SimulationError
-from battery_predictor.simulation.engine.kernel import PARALLEL_MIN_SETS, fused_kernel
+from battery_predictor.simulation.engine.kernel import PARALLEL_MIN_SETS, forget_kernel, fused_kernel
 from battery_predictor.simulation.engine.modal import (
     ModalSystem,
     boundary_surfaces,
@@ -34,6 +35,7 @@ from battery_predictor.simulation.engine.model import (
     LinearSpm,
 )
 
+LOG = logging.getLogger(__name__)
 #: Cut-off times are located to this accuracy (s).
 CUTOFF_TIME_TOL_S = 1e-7
 _MAX_ROOT_ITERATIONS = 100
@@ -207,7 +209,14 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
     edges = np.concatenate([[0.0], np.cumsum(duration_s)])
     kernel = None if keep_states or backend == "numpy" else fused_kernel(model, parallel=n_sets >= PARALLEL_MIN_SETS)
     if kernel is not None:
-        return _run_fused(kernel, model, modal, batch, z0, duration_s, current, edges)
+        from numba.core.errors import NumbaError
+
+        try:
+            return _run_fused(kernel, model, modal, batch, z0, duration_s, current, edges)
+        except NumbaError as exc:  # the printed voltage did not compile: the NumPy voltage is the same expression
+            LOG.warning("engine: the fused kernel does not compile for this model (%s); using the two-pass path",
+                        str(exc).splitlines()[0])
+            forget_kernel(model)
     return _run_two_pass(model, modal, batch, z0, duration_s, current, edges, backend,
                          stride=1 if keep_states else 64)
 
