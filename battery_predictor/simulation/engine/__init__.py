@@ -17,4 +17,17 @@
 
 from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
 
-__all__ = ["pack_voltage_v", "series_resistance_factor"]
+__all__ = ["EnginePack", "EngineSimulator", "pack_voltage_v", "series_resistance_factor"]
+
+
+def __getattr__(name: str):
+    """``EngineSimulator`` and ``EnginePack`` on first use (the pack voltage alone stays a light import)."""
+    if name == "EngineSimulator":
+        from battery_predictor.simulation.engine.simulator import EngineSimulator
+
+        return EngineSimulator
+    if name == "EnginePack":
+        from battery_predictor.simulation.engine.segments import EnginePack
+
+        return EnginePack
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
