@@ -435,3 +435,14 @@ def test_a_kernel_that_does_not_compile_falls_back_to_the_two_pass_path(temi_par
     from battery_predictor.simulation.engine.kernel import fused_kernel
 
     assert fused_kernel(model) is None
+
+
+def test_the_package_exposes_the_simulator_and_the_segment_runner():
+    import battery_predictor.simulation.engine as engine_package
+    from battery_predictor.simulation.engine.segments import EnginePack
+    from battery_predictor.simulation.engine.simulator import EngineSimulator
+
+    assert engine_package.EngineSimulator is EngineSimulator
+    assert engine_package.EnginePack is EnginePack
+    with pytest.raises(AttributeError):
+        engine_package.NoSuchName  # noqa: B018
