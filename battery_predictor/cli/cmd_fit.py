@@ -22,7 +22,7 @@ from battery_predictor.cli.common import (
 )
 
 #: Default budget of ``--method identify`` in model evaluations.
-DEFAULT_EVALUATIONS = 400
+DEFAULT_EVALUATIONS = 1000
 
 
 def register(sub) -> None:

@@ -361,7 +361,7 @@ def _refine(residual, start: np.ndarray, max_evaluations: int) -> float:
     return min(seen, default=math.inf)
 
 
-def identify(problem: IdentificationProblem, *, evaluations: int = 400, seed: int = 0,
+def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: int = 0,
              tpe_fraction: float = DEFAULT_TPE_FRACTION, starts: int = DEFAULT_STARTS,
              startup_per_coordinate: int = STARTUP_TRIALS_PER_COORDINATE,
              progress: Callable[[str, int, float], None] | None = None) -> IdentificationResult:
