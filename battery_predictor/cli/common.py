@@ -174,8 +174,10 @@ def progress_bar(total: float, desc: str, unit: str, *, enabled: bool, stream: T
 
     # shutil falls back to 80 x 24 where the terminal reports 0 x 0 (tqdm would then draw nothing)
     size = shutil.get_terminal_size()
+    # disable=False explicitly: TQDM_DISABLE (set for a moment by quiet_pybamm in any thread) only
+    # changes tqdm's defaults, and ``enabled`` has already decided
     bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr if stream is None else stream, delay=delay_s,
-               ncols=size.columns, nrows=size.lines, leave=False)
+               ncols=size.columns, nrows=size.lines, leave=False, disable=False)
 
     def update(done: float) -> None:
         bar.n = min(done, total)

@@ -267,11 +267,12 @@ class PredictorCore:
         with self._cal_lock:
             with self._lock:
                 hist = list(self._history)
-                fresh_reason, self._recalibrate_reason = self._recalibrate_reason, ""
+                if self._recalibrate_reason:  # a new pack state: the cached one must never be continued
+                    self._cal, self._recalibrate_reason = None, ""
             if not hist:
                 raise BatteryPredictorError("no pack state to calibrate on")
             stamp = hist[-1][0]
-            cached = None if fresh_reason else self._cal
+            cached = self._cal
             if cached is not None and cached[0] == stamp:
                 return cached[2]
             if (cached is not None and cached[2].state is not None and not cached[2].clipped

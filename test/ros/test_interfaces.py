@@ -95,7 +95,7 @@ def test_route_section_fields_and_slope_constants() -> None:
 
 def test_can_accept_route_fields() -> None:
     assert CanAcceptRoute.Request.get_fields_and_field_types() == {
-        "sections": "sequence<battery_predictor_msgs/RouteSection>",
+        "sections": "sequence<battery_predictor_msgs/RouteSection, 500>",
         "starts_away_from_charger": "boolean",
         "ends_away_from_charger": "boolean",
     }
