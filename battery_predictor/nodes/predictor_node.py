@@ -60,6 +60,7 @@ from battery_predictor.prediction.core import (
     RuntimeStatus,
 )
 from battery_predictor.prediction.load_estimate import ESTIMATORS
+from battery_predictor.prediction.pack_model import BACKENDS
 from battery_predictor.prediction.route import RouteDecision, rejected
 
 #: A pack state this much older than the latest one restarts the predictor (time base restarted), s.
@@ -117,8 +118,8 @@ class PredictorNode(Node):
             route = (f"route threshold {self.core.route_min_voltage_v:.2f} V at {self.core.standstill_current_a:.2f} A"
                      if math.isfinite(self.core.route_min_voltage_v) else "no route threshold (routes are rejected)")
             self.get_logger().info(f"pack model {self.core.params.name} from {self.core.params.source} loaded in "
-                                   f"{time.perf_counter() - t0:.1f} s; cut-off {self.core.cutoff_voltage_v:.2f} V, "
-                                   f"{route}")
+                                   f"{time.perf_counter() - t0:.1f} s on {self.core.model_backend}; cut-off "
+                                   f"{self.core.cutoff_voltage_v:.2f} V, {route}")
         self._lock = threading.Lock()
         self._monitor_stale = False
         self._monitor_stale_since_s = math.nan
@@ -230,6 +231,9 @@ class PredictorNode(Node):
             peak_duration_s=declare_float(self, "peak_duration_s", _core_default("peak_duration_s"),
                                           "How long a sample peak lasts in the model, s (peak_source 'sample').",
                                           0.01, 60.0),
+            simulator=declare_str(self, "simulator", PredictorConfig.simulator,
+                                  "Pack model: 'auto' (the SPM engine unless the params activate extensions, then "
+                                  "PyBaMM's solver), 'engine' or 'pybamm'.", BACKENDS),
             route_currents_file=resolve_params_file(declare_str(
                 self, "route_currents_file", "",
                 "Per-(payload, slope) current samples of the luggage robot; empty = the bundled "
@@ -350,7 +354,7 @@ class PredictorNode(Node):
             values += [("route_latency_last_s", f"{latencies[-1]:.4f}"),
                        ("route_latency_max_s", f"{max(latencies):.4f}")]
         if self.core.params is not None:
-            values.append(("params_file", str(self.core.params.source)))
+            values += [("params_file", str(self.core.params.source)), ("pack_model", self.core.model_backend)]
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()
         array.status = [DiagnosticStatus(level=level, name=f"{self.get_name()}: pack model", message=message,

@@ -22,6 +22,7 @@ from battery_predictor.params import PackParams, load_params
 from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, history_segments
 from battery_predictor.prediction.cell_runner import PackRunner
 from battery_predictor.prediction.load_estimate import LoadEstimator
+from battery_predictor.prediction.pack_model import pack_model
 from battery_predictor.prediction.route import RouteDecision, evaluate_route, rejected
 from battery_predictor.prediction.runtime import predict_remaining_runtime
 from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v, unexplained_jump_v
@@ -94,6 +95,9 @@ class PredictorConfig:
         the first sample below the cut-off).
     peak_duration_s : float
         How long a sample peak lasts in the model, s (``peak_source = "sample"``).
+    simulator : str
+        ``"auto"`` (the SPM engine unless the params activate extensions), ``"engine"`` or
+        ``"pybamm"`` (PyBaMM's solver stepped segment by segment); see :mod:`.pack_model`.
     recalibrate_after_s : float
         Between full calibrations (at most this far apart, s) the calibrated state is propagated
         with the measured current (charge counting through the model), which is more reliable
@@ -118,6 +122,7 @@ class PredictorConfig:
     peak_current_quantile: float = 0.99
     peak_source: str = "window"
     peak_duration_s: float = 1.0
+    simulator: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -161,9 +166,11 @@ class PredictorCore:
         self.model_error = ""
         self.params: PackParams | None = None
         self.runner: PackRunner | None = None
+        #: Which pack model answers, and why (engine or PyBaMM stepping).
+        self.model_backend = ""
         try:
             self.params = params or load_params(Path(config.params_file))
-            self.runner = PackRunner(self.params)
+            self.runner, self.model_backend = pack_model(self.params, config.simulator)
         except BatteryPredictorError as exc:
             self.model_error = str(exc)
         th = self.params.thresholds if self.params else {}

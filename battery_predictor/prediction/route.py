@@ -103,7 +103,7 @@ def evaluate_route(runner: PackRunner, start: float | RunState, sections: Sequen
     threshold_v, standstill_current_a : float
         Acceptance threshold (V) and the standstill current (A) it applies at.
     """
-    soc = runner.soc_of(start) if isinstance(start, RunState) else float(start)
+    soc = float(start) if isinstance(start, (int, float)) else runner.soc_of(start)
     try:
         segments = route_segments(sections, standstill_current_a, currents)
     except BatteryPredictorError as exc:
