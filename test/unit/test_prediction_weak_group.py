@@ -100,3 +100,14 @@ def test_calibrations_keep_the_weak_group_and_predict_the_simulated_runtime(weak
     from_state = predict_remaining_runtime(weak, float(v_hist[-1]), 2.5, 298.15, 2.5, 13.30, calibration=single)
     # the single sample assumes relaxed particles: about -2.5 %, as much as on the plain pack
     assert from_state.remaining_s == pytest.approx(t_true_s - t_now_s, rel=0.04)
+
+
+def test_the_core_runs_extensions_on_pybamm_and_plain_params_on_the_engine(weak_params):
+    from battery_predictor.prediction.core import PredictorConfig, PredictorCore
+
+    weak = PredictorCore(PredictorConfig(params_file=str(weak_params.source)), params=weak_params)
+    assert weak.model_backend.startswith("pybamm (the engine here runs no extensions: cell_imbalance")
+    plain = PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml")))
+    assert plain.model_backend.startswith("engine")
+    forced = PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml"), simulator="pybamm"))
+    assert forced.model_backend.startswith("pybamm")
