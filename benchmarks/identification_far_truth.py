@@ -1,0 +1,124 @@
+"""Identification from far away: a Temi pack whose truth is drawn far from the shipped params.
+
+The truth: every identifiable coordinate drawn uniformly (capacities +-40 %, the initial negative
+stoichiometry in 0.6-0.95, the series resistance from 0 to 3x the shipped value), simulated with
+a lumped thermal model (the fit model is isothermal), 5 s samples with 5 mV voltage noise,
+10 mV / 0.1 A quantisation. Day 1 (usage seed 2k+1) is fitted; day 2 (seed 2k+2, another usage)
+is predicted from its own first voltage (each day starts with 60 s at rest, so that voltage is the
+open-circuit voltage) and scored: held-out RMSE, time to 13.30 V against the first noisy sample
+below it and against the noise-free truth (a peak plus noise can cross the threshold hours before
+the noise-free voltage does, on a flat discharge).
+
+Run: ``nice .venv/bin/python benchmarks/identification_far_truth.py --seeds 0 1 2 --evaluations 1000``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from battery_predictor.fitting.identifiable import default_space, pybamm_values, shipped_coordinates
+from battery_predictor.fitting.identification import IdentificationProblem, identifiability_of, identify
+from battery_predictor.fitting.problem import request_for_recording
+from battery_predictor.fitting.resample import resample_windows
+from battery_predictor.params import load_params
+from battery_predictor.profiles.temi import generate_usage_profile
+from battery_predictor.recording import Recording
+from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
+
+REPO = Path(__file__).resolve().parents[1]
+NOISE_V = 0.005
+
+
+def draw_truth(params, rng) -> dict[str, float]:
+    """Identifiable coordinates drawn far from the shipped ones."""
+    s = shipped_coordinates(params)
+    return {
+        "negative_capacity_ah": s["negative_capacity_ah"] * rng.uniform(0.6, 1.4),
+        "positive_capacity_ah": s["positive_capacity_ah"] * rng.uniform(0.6, 1.4),
+        "negative_stoichiometry": rng.uniform(0.6, 0.95),
+        "series_resistance_ohm": s["series_resistance_ohm"] * rng.uniform(0.0, 3.0),
+    }
+
+
+def day(truth_params, seed: int, initial_ocv_v: float | None) -> tuple[Recording, np.ndarray]:
+    """One usage day of the truth pack (lumped thermal), 5 s samples with sensor noise and quantisation.
+
+    Returns the recording and the noise-free pack voltage (V) at its samples.
+    """
+    profile = generate_usage_profile(seed=seed, max_duration_s=8 * 3600)
+    load = StepLoad.constant(0.0, 60.0).append(StepLoad.from_profile(profile).resample(5.0))
+    thermal = replace(truth_params, options={**truth_params.options, "thermal": "lumped"})
+    t = np.arange(0.0, load.end_s - 5.0, 5.0)
+    req = SimulationRequest(load=load, output_time_s=t,
+                            initial_pack_ocv_v=None if initial_ocv_v is None else initial_ocv_v * truth_params.series)
+    res = get_simulator("fast").simulate(thermal, req)
+    rng = np.random.default_rng(seed)
+    v = np.round((res.pack_voltage_v + rng.normal(0.0, NOISE_V, res.time_s.size)) / 0.01) * 0.01
+    i = np.round(load.current_at(res.time_s) / 0.1) * 0.1
+    rec = Recording(res.time_s, v, i, temperature_k=np.full(res.time_s.size, 298.15), source=f"temi-day-{seed}")
+    return rec, res.pack_voltage_v
+
+
+def time_to_v(t, v, threshold_v) -> float | None:
+    below = np.flatnonzero(v <= threshold_v)
+    return float(t[below[0]]) if below.size else None
+
+
+def run_seed(params, seed: int, evaluations: int, resample_s: float) -> dict:
+    rng = np.random.default_rng(1000 + seed)
+    truth = draw_truth(params, rng)
+    truth_params = params.with_values(pybamm_values(params, truth)[0])
+    fit_day, _ = day(truth_params, 2 * seed + 1, None)
+    test_day, test_clean_v = day(truth_params, 2 * seed + 2, 4.0)
+    fit_rec = resample_windows(fit_day, resample_s)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        space = default_space(params, [fit_rec])
+    problem = IdentificationProblem(params, [fit_rec], get_simulator("fast"), space)
+    tic = time.perf_counter()
+    result = identify(problem, evaluations=evaluations, seed=seed)
+    seconds = time.perf_counter() - tic
+    score = problem.score(result.coordinates)
+    fitted = params.with_values(score.values[0])
+    threshold = float(params.thresholds["runtime_cutoff_voltage_v"])
+    req = request_for_recording(fitted, test_day, initial_state="voltage")
+    pred = get_simulator("fast").simulate(fitted, req)
+    t_meas = time_to_v(test_day.relative_time_s, test_day.voltage_v, threshold)
+    t_clean = time_to_v(test_day.relative_time_s, test_clean_v, threshold)
+    t_pred = pred.time_to_pack_voltage_s(threshold)
+    n = min(pred.time_s.size, test_day.time_s.size)
+    rmse = float(np.sqrt(np.mean((pred.pack_voltage_v[:n] - test_day.voltage_v[:n]) ** 2)))
+    report = identifiability_of(problem, result.unit)
+    return {
+        "seed": seed, "truth": truth, "fitted": {k: result.coordinates[k] for k in truth},
+        "fit_r2_mod": score.r2_mod, "fit_rmse_mv": score.rmse_mv[0], "evaluations": result.evaluations,
+        "fit_seconds": seconds, "heldout_rmse_mv": 1e3 * rmse,
+        "heldout_time_to_threshold_s": {"measured": t_meas, "noise_free_truth": t_clean, "predicted": t_pred},
+        "heldout_runtime_error_pct": None if (t_meas is None or t_pred is None) else 100 * (t_pred - t_meas) / t_meas,
+        "heldout_runtime_error_vs_noise_free_pct": (None if (t_clean is None or t_pred is None)
+                                                    else 100 * (t_pred - t_clean) / t_clean),
+        "determined": dict(zip(report.names, report.determined, strict=True)),
+        "correlated_pairs": report.correlated_pairs,
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0])
+    ap.add_argument("--evaluations", type=int, default=400)
+    ap.add_argument("--resample", type=float, default=30.0)
+    args = ap.parse_args()
+    params = load_params(REPO / "params" / "temi.yaml")
+    for seed in args.seeds:
+        print(json.dumps(run_seed(params, seed, args.evaluations, args.resample)), flush=True)
+
+
+if __name__ == "__main__":
+    main()

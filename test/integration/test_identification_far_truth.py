@@ -1,0 +1,35 @@
+"""Identification from far away: a Temi truth drawn far from the shipped params, a held-out day.
+
+The generator (``benchmarks/identification_far_truth.py``) draws every identifiable coordinate
+in its physical range, simulates a lumped-thermal pack with sensor noise and quantisation, fits
+one day and predicts another. More draws: ``BP_FAR_TRUTH_SEEDS="0 1 2" pytest ...``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+SEEDS = [int(s) for s in os.environ.get("BP_FAR_TRUTH_SEEDS", "0").split()]
+
+
+def _generator():
+    spec = importlib.util.spec_from_file_location("far_truth", REPO / "benchmarks" / "identification_far_truth.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_far_truth_is_fitted_to_the_noise_and_its_held_out_runtime_within_one_percent(temi_params, seed):
+    gen = _generator()
+    out = gen.run_seed(temi_params, seed, evaluations=1000, resample_s=30.0)
+    # 5 mV noise + 10 mV quantisation (2.9 mV rms) on the fitted day, twice that as the floor
+    assert out["fit_rmse_mv"] < 2 * (gen.NOISE_V * 1e3 + 2.9)
+    assert abs(out["heldout_runtime_error_vs_noise_free_pct"]) < 1.0
+    assert all(out["determined"].values())
