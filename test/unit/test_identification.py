@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.errors import SimulationError
+from battery_predictor.errors import ParamsError, SimulationError
 from battery_predictor.fitting.identifiability import analyse
 from battery_predictor.fitting.identifiable import (
     default_space,
@@ -202,3 +202,35 @@ def test_refinement_near_the_truth_converges_to_it_and_reports_the_positive_elec
     rep = identifiability_of(problem, result.unit)
     determined = dict(zip(rep.names, rep.determined, strict=True))
     assert determined["positive_capacity_ah"] and determined["series_resistance_ohm"]
+
+
+def test_every_recording_shares_the_cyclable_lithium_and_starts_at_its_own_ocv(panasonic):
+    coords = {**shipped_coordinates(panasonic), "initial_ocv_v:0": 4.15, "initial_ocv_v:1": 3.80}
+    first, second = pybamm_values(panasonic, coords, n_recordings=2)
+    c_max = {d: float(panasonic.parameter_values()[f"Maximum concentration in {d} electrode [mol.m-3]"])
+             for d in ("negative", "positive")}
+
+    def lithium_ah(values):
+        return sum(values[f"Initial concentration in {d} electrode [mol.m-3]"] / c_max[d] * coords[f"{d}_capacity_ah"]
+                   for d in ("negative", "positive"))
+
+    assert lithium_ah(second) == pytest.approx(lithium_ah(first), rel=1e-9)
+    u_n, u_p = ocp_curves(panasonic)
+    grid = np.linspace(1e-4, 1 - 1e-4, u_n.size)
+    for values, ocv in ((first, 4.15), (second, 3.80)):
+        x = values["Initial concentration in negative electrode [mol.m-3]"] / c_max["negative"]
+        y = values["Initial concentration in positive electrode [mol.m-3]"] / c_max["positive"]
+        assert np.interp(y, grid, u_p) - np.interp(x, grid, u_n) == pytest.approx(ocv, abs=3e-3)
+
+
+def test_optional_diffusivity_coordinates_reach_the_pybamm_values(panasonic):
+    space = {c.name: c for c in default_space(panasonic, extra=("positive_diffusivity_m2_s",))}
+    coord = space["positive_diffusivity_m2_s"]
+    assert coord.log and coord.contains(coord.initial)
+    values = pybamm_values(panasonic, {"positive_diffusivity_m2_s": 3 * coord.initial})[0]
+    assert values["Positive particle diffusivity [m2.s-1]"] == pytest.approx(3 * coord.initial)
+
+
+def test_an_unknown_optional_coordinate_is_a_params_error(panasonic):
+    with pytest.raises(ParamsError, match="unknown fit coordinate"):
+        default_space(panasonic, extra=("electrolyte_conductivity",))
