@@ -414,7 +414,7 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
     refined = 0
     for k, unit in enumerate(picked):
         remaining = evaluations - log.count
-        if remaining < MIN_LEFTOVER_JACOBIANS * jacobian_cost or (k >= starts and remaining <= 0):
+        if remaining < MIN_LEFTOVER_JACOBIANS * jacobian_cost:
             break
         planned_left = max(max(1, starts) - k, 1)
         log.budget = log.count + min(remaining, max(remaining // planned_left, MIN_REFINE_JACOBIANS * jacobian_cost))
