@@ -168,9 +168,7 @@ def evaluate_recording(params: PackParams, rec: Recording, *, cutoff_v: float, c
         Predictor settings (default: the node's defaults with this cut-off).
     """
     win = Windows.of(rec)
-    margin = 0.5 * params.series if end_margin_v is None else end_margin_v
-    start_a = _start_current_a(params)
-    discharge = find_discharge(win, cutoff_v, start_current_a=start_a, end_margin_v=margin)
+    discharge = _discharge_of(params, win, cutoff_v, end_margin_v)
     core = PredictorCore(config or PredictorConfig(params_file=str(params.source), cutoff_voltage_v=cutoff_v),
                          params=params)
     times = [discharge.start_s + f * (discharge.end_s - discharge.start_s) for f in checkpoints]
@@ -194,10 +192,14 @@ def evaluate_recording(params: PackParams, rec: Recording, *, cutoff_v: float, c
 def charge_to_end_ah(params: PackParams, rec: Recording, cutoff_v: float, end_margin_v: float | None = None) -> float:
     """Charge drawn from the discharge start to its end, Ah (for a counter's capacity); NaN when unknown."""
     win = Windows.of(rec)
-    margin = 0.5 * params.series if end_margin_v is None else end_margin_v
-    start_a = _start_current_a(params)
-    d = find_discharge(win, cutoff_v, start_current_a=start_a, end_margin_v=margin)
+    d = _discharge_of(params, win, cutoff_v, end_margin_v)
     return win.charge_ah(d.start_s, d.end_s) if d.known else math.nan
+
+
+def _discharge_of(params: PackParams, win: Windows, cutoff_v: float, end_margin_v: float | None) -> Discharge:
+    """:func:`find_discharge` with the pack's defaults (start at C/100, end within 0.5 V per series cell)."""
+    margin = 0.5 * params.series if end_margin_v is None else end_margin_v
+    return find_discharge(win, cutoff_v, start_current_a=_start_current_a(params), end_margin_v=margin)
 
 
 def error_summary(pairs: Sequence[tuple[float, float]], *, late_fraction_pairs: Sequence[tuple[float, float]] = ()
