@@ -59,12 +59,9 @@ MAX_RESISTANCE_OHM_PER_CELL = 0.2
 #: Diffusivities: searched within these multiples of the params' value (log scale).
 DIFFUSIVITY_FACTORS = (0.01, 100.0)
 #: Initial OCV of a recording: searched this far (V per cell) below and above its first voltage.
+#: The box is wide also for recordings that start at rest: a 50 mV box there is the worse choice
+#: on far-truth Temi draws (docs/identification.md).
 INITIAL_OCV_MARGIN_V = (0.15, 0.35)
-#: ... and within this much of it when the recording starts at rest (the rest voltage is the OCV
-#: up to relaxation; a wider box lets the state absorb OCP errors and spoils validation).
-RESTING_OCV_MARGIN_V = 0.05
-#: Below this |current| / nominal cell capacity (1/h) a recording starts at rest.
-REST_C_RATE = 0.02
 #: Stoichiometry grid on which the OCPs are tabulated.
 _STO_GRID = np.linspace(1e-4, 1.0 - 1e-4, 2001)
 
@@ -259,25 +256,20 @@ def _widened(name: str, initial: float, low: float, high: float, log: bool) -> C
 def initial_ocv_coordinates(params: PackParams, recordings: Sequence[Recording]) -> list[Coordinate]:
     """One initial-OCV coordinate per recording, around its first cell voltage.
 
-    The box is narrow (:data:`RESTING_OCV_MARGIN_V`) for a recording that starts at rest.
-
     A recording that starts above the params' upper cut-off gets a warning: its box follows
     the data (the discharge simulation does not use the upper cut-off).
     """
     upper_v = float(params.parameter_values()["Upper voltage cut-off [V]"])
     lower_v = params.cell_lower_cutoff_v
-    q_cell = cell_capacity_ah(params)
     out = []
     for k, rec in enumerate(recordings):
         v_first = float(rec.voltage_v[0]) / params.series
-        at_rest = abs(float(rec.current_a[0])) / params.parallel / q_cell < REST_C_RATE
         if v_first > upper_v + 1e-3:
             warnings.warn(f"{rec.source}: starts at {v_first:.3f} V per cell, above the params' upper cut-off "
                           f"{upper_v:.3f} V; its initial state is searched around the measured voltage",
                           UserWarning, stacklevel=2)
-        below_v, above_v = (RESTING_OCV_MARGIN_V, RESTING_OCV_MARGIN_V) if at_rest else INITIAL_OCV_MARGIN_V
-        lo = max(lower_v, v_first - below_v)
-        hi = v_first + above_v
+        lo = max(lower_v, v_first - INITIAL_OCV_MARGIN_V[0])
+        hi = v_first + INITIAL_OCV_MARGIN_V[1]
         start = v_first + 0.02 if float(rec.current_a[0]) > 0 else v_first
         out.append(Coordinate(f"initial_ocv_v:{k}", min(max(start, lo), hi), lo, hi, False, recording=k))
     return out

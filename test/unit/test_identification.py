@@ -235,12 +235,3 @@ def test_an_unknown_optional_coordinate_is_a_params_error(panasonic):
     with pytest.raises(ParamsError, match="unknown fit coordinate"):
         default_space(panasonic, extra=("electrolyte_conductivity",))
 
-
-def test_a_recording_that_starts_at_rest_gets_a_narrow_initial_ocv_box(panasonic):
-    t = np.arange(0.0, 600.0, 10.0)
-    current_a = np.full(t.size, 2.0)
-    resting = Recording(t, np.full(t.size, 4.0), np.concatenate([[0.01], current_a[1:]]), source="rest.csv")
-    loaded = Recording(t, np.full(t.size, 4.0), current_a, source="loaded.csv")
-    rest_box, loaded_box = default_space(panasonic, [resting, loaded])[-2:]
-    assert rest_box.contains(4.0) and loaded_box.contains(4.0)
-    assert rest_box.high - rest_box.low < 0.5 * (loaded_box.high - loaded_box.low)
