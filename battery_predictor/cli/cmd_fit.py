@@ -51,7 +51,8 @@ def register(sub) -> None:
     p.add_argument("--workers", type=int, default=1, help="processes working on the study (default 1)")
     p.add_argument("--parameters", nargs="+", default=None,
                    help="fit these parameters instead of the params' fit.parameters")
-    p.add_argument("--simulator", choices=("fast", "liionpack"), default="fast")
+    p.add_argument("--simulator", choices=("fast", "liionpack", "engine"), default="fast",
+                   help="fast (PyBaMM), liionpack (reference) or engine (the SPM engine, much faster)")
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto")
     p.add_argument("--out", required=True, help="fitted params YAML to write")
     p.add_argument("--plot", default=None, help="PNG of measured vs simulated (default: <out>.png)")
@@ -69,6 +70,7 @@ def run(args) -> int:
         return run_identify(args)
     if args.trials is None:
         args.trials = 1000
+    from battery_predictor.cli.fit_identify import simulator_named
     from battery_predictor.fitting.identification import raw_identifiability
     from battery_predictor.fitting.optimiser import TPEOptimiser
     from battery_predictor.fitting.problem import FitProblem
@@ -76,7 +78,6 @@ def run(args) -> int:
     from battery_predictor.fitting.space import fit_space
     from battery_predictor.params import load_params
     from battery_predictor.plots import plot_voltage_fit
-    from battery_predictor.simulation import get_simulator
 
     check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
     check_plot_file(args.plot or Path(args.out).with_suffix(".png"))
@@ -86,7 +87,7 @@ def run(args) -> int:
     storage = args.storage or f"sqlite:///{out.with_suffix('.optuna.db').resolve()}"
     out.parent.mkdir(parents=True, exist_ok=True)
     space = fit_space(params, tuple(args.parameters) if args.parameters else None)
-    problem = FitProblem(params=params, recordings=recs, simulator=get_simulator(args.simulator),
+    problem = FitProblem(params=params, recordings=recs, simulator=simulator_named(args.simulator),
                          initial_state=args.initial_state)
     optimiser = TPEOptimiser(n_trials=args.trials, seed=args.seed, storage=storage, study_name=args.study_name,
                              workers=args.workers, progress=not args.no_progress)

@@ -11,7 +11,8 @@ def register(sub) -> None:
     p = sub.add_parser("simulate", help="score a params file on measured data (R2_mod, RMSE, runtime)")
     p.add_argument("--params", required=True, help="params YAML (e.g. the output of fit)")
     add_data_arguments(p)
-    p.add_argument("--simulator", choices=("fast", "liionpack"), default="fast")
+    p.add_argument("--simulator", choices=("fast", "liionpack", "engine"), default="fast",
+                   help="fast (PyBaMM), liionpack (reference) or engine (the SPM engine, much faster)")
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto",
                    help="initial state: params' concentrations or first measured voltage (default auto)")
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
@@ -22,18 +23,18 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from battery_predictor.cli.fit_identify import simulator_named
     from battery_predictor.fitting.cost import r2_mod, rmse_v
     from battery_predictor.fitting.problem import request_for_recording
     from battery_predictor.fitting.resample import resample_all
     from battery_predictor.params import load_params
-    from battery_predictor.simulation import get_simulator
 
     if args.plot:
         check_plot_file(args.plot)
     tic = time.perf_counter()
     params = load_params(args.params)
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
-    sim = get_simulator(args.simulator)
+    sim = simulator_named(args.simulator)
     rows, results = [], []
     for rec in recs:
         req = request_for_recording(params, rec, initial_state=args.initial_state, extend_s=0.5 * rec.duration_s)

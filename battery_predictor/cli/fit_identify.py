@@ -10,6 +10,17 @@ from pathlib import Path
 from battery_predictor.cli.common import check_output_file, check_plot_file, data_options, load_data, print_json
 
 
+def simulator_named(name: str):
+    """The simulator of ``--simulator``: ``engine`` (the SPM engine) or one of :func:`get_simulator`'s."""
+    if name == "engine":
+        from battery_predictor.simulation.engine import EngineSimulator
+
+        return EngineSimulator()
+    from battery_predictor.simulation import get_simulator
+
+    return get_simulator(name)
+
+
 def _progress_printer(enabled: bool):
     if not enabled:
         return None
@@ -34,7 +45,6 @@ def run_identify(args) -> int:
     from battery_predictor.fitting.resample import resample_all
     from battery_predictor.params import load_params
     from battery_predictor.plots import plot_voltage_fit
-    from battery_predictor.simulation import get_simulator
 
     check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
     check_plot_file(args.plot or Path(args.out).with_suffix(".png"))
@@ -45,7 +55,7 @@ def run_identify(args) -> int:
         space = default_space(params, recs, extra=tuple(args.coordinates))
     for w in caught:
         sys.stderr.write(f"warning: {w.message}\n")
-    problem = IdentificationProblem(params=params, recordings=recs, simulator=get_simulator(args.simulator),
+    problem = IdentificationProblem(params=params, recordings=recs, simulator=simulator_named(args.simulator),
                                     space=space)
     result = identify(problem, evaluations=args.evaluations, seed=args.seed,
                       tpe_fraction=DEFAULT_TPE_FRACTION if args.tpe_fraction is None else args.tpe_fraction,

@@ -77,3 +77,13 @@ def test_a_resample_window_that_is_not_positive_is_a_one_line_error(one_second_c
     proc = _run("simulate", "--params", str(PARAMS), "--data", str(one_second_csv), "--resample", window)
     assert proc.returncode == 2
     assert "--resample" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_simulate_on_the_engine_scores_like_the_fast_simulator(one_second_csv):
+    scores = {}
+    for sim in ("fast", "engine"):
+        proc = _run("simulate", "--params", str(PARAMS), "--data", str(one_second_csv), "--resample", "10",
+                    "--simulator", sim, "--json")
+        assert proc.returncode == 0, proc.stderr
+        scores[sim] = json.loads(proc.stdout)["rmse_mV"]
+    assert scores["engine"] == pytest.approx(scores["fast"], abs=0.1)
