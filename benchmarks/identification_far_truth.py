@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from battery_predictor.cli.fit_identify import simulator_named
 from battery_predictor.fitting.identifiable import default_space, pybamm_values, shipped_coordinates
 from battery_predictor.fitting.identification import IdentificationProblem, identifiability_of, identify
 from battery_predictor.fitting.problem import request_for_recording
@@ -71,7 +72,7 @@ def time_to_v(t, v, threshold_v) -> float | None:
     return float(t[below[0]]) if below.size else None
 
 
-def run_seed(params, seed: int, evaluations: int, resample_s: float) -> dict:
+def run_seed(params, seed: int, evaluations: int, resample_s: float, simulator: str = "fast") -> dict:
     rng = np.random.default_rng(1000 + seed)
     truth = draw_truth(params, rng)
     truth_params = params.with_values(pybamm_values(params, truth)[0])
@@ -81,7 +82,7 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         space = default_space(params, [fit_rec])
-    problem = IdentificationProblem(params, [fit_rec], get_simulator("fast"), space)
+    problem = IdentificationProblem(params, [fit_rec], simulator_named(simulator), space)
     tic = time.perf_counter()
     result = identify(problem, evaluations=evaluations, seed=seed)
     seconds = time.perf_counter() - tic
@@ -114,10 +115,11 @@ def main() -> None:
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
     ap.add_argument("--evaluations", type=int, default=400)
     ap.add_argument("--resample", type=float, default=30.0)
+    ap.add_argument("--simulator", choices=("fast", "engine"), default="fast", help="simulator of the fit")
     args = ap.parse_args()
     params = load_params(REPO / "params" / "temi.yaml")
     for seed in args.seeds:
-        print(json.dumps(run_seed(params, seed, args.evaluations, args.resample)), flush=True)
+        print(json.dumps(run_seed(params, seed, args.evaluations, args.resample, args.simulator)), flush=True)
 
 
 if __name__ == "__main__":
