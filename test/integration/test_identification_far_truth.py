@@ -2,7 +2,7 @@
 
 The generator (``benchmarks/identification_far_truth.py``) draws every identifiable coordinate
 in its physical range, simulates a lumped-thermal pack with sensor noise and quantisation, fits
-one day and predicts another. More draws: ``BP_FAR_TRUTH_SEEDS="0 1 2" pytest ...``.
+one day (on the SPM engine) and predicts another. More draws: ``BP_FAR_TRUTH_SEEDS="0 1 2" pytest ...``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def _generator():
 @pytest.mark.parametrize("seed", SEEDS)
 def test_a_far_truth_is_fitted_to_the_noise_and_its_held_out_runtime_within_one_percent(temi_params, seed):
     gen = _generator()
-    out = gen.run_seed(temi_params, seed, evaluations=1000, resample_s=30.0)
+    out = gen.run_seed(temi_params, seed, evaluations=1000, resample_s=30.0, simulator="engine")
     # 5 mV noise + 10 mV quantisation (2.9 mV rms) on the fitted day, twice that as the floor
     assert out["fit_rmse_mv"] < 2 * (gen.NOISE_V * 1e3 + 2.9)
     assert abs(out["heldout_runtime_error_vs_noise_free_pct"]) < 1.0
