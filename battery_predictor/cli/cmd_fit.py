@@ -9,6 +9,7 @@ reports identifiability; ``tpe`` is the seed paper's TPE over the params' raw ``
 from __future__ import annotations
 
 import datetime as _dt
+import sys
 from pathlib import Path
 
 from battery_predictor.cli.common import (
@@ -113,13 +114,19 @@ def run(args) -> int:
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")
+    if result.resumed_trials:
+        print(f"fit: resumed study {result.study_name!r} in {result.storage}: {result.resumed_trials} trials were "
+              "already done (pass --study-name NAME, or delete the storage file, to start afresh)", file=sys.stderr)
     if args.json:
         print_json({"method": "tpe", "r2_mod": best.r2_mod, "trials": result.trials,
-                    "failed_trials": result.failed_trials, "seconds": result.seconds, "params": result.best_values,
+                    "failed_trials": result.failed_trials, "resumed_trials": result.resumed_trials,
+                    "improved": result.improved, "seconds": result.seconds, "params": result.best_values,
                     "identifiability": report.to_dict(), "out": str(out), "plot": str(plot_path)})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
           f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s)")
+    if not result.improved:
+        print("  no trial beat the starting values (trial 0): the fitted params equal the start")
     for space_p in space:
         v = result.best_values[space_p.name]
         print(f"  {space_p.name:<58} {space_p.initial:>12.5g} -> {v:>12.5g}")

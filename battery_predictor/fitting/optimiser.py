@@ -47,6 +47,10 @@ class FitResult:
         Wall time of this run in s.
     study_name, storage : str
         Where the study is stored.
+    resumed_trials : int
+        Trials the study already held when this run started (a resumed study).
+    improved : bool
+        False when no trial beat the starting values (the enqueued trial 0 is the best).
     """
 
     best_values: dict[str, float]
@@ -56,6 +60,8 @@ class FitResult:
     seconds: float
     study_name: str
     storage: str
+    resumed_trials: int = 0
+    improved: bool = True
 
 
 def study_name_for(problem: FitProblem, space: Sequence[FitParameter]) -> str:
@@ -215,4 +221,6 @@ class TPEOptimiser:
             seconds=time.perf_counter() - tic,
             study_name=name,
             storage=self.storage or "memory",
+            resumed_trials=done,
+            improved=best.number != 0,
         )

@@ -120,8 +120,16 @@ def test_stopped_fit_resumes_from_sqlite_storage(temi_params, tmp_path):
     first = TPEOptimiser(n_trials=8, seed=0, storage=storage, progress=False).run(problem, space)
     second = TPEOptimiser(n_trials=12, seed=0, storage=storage, progress=False).run(problem, space)
     assert first.trials == 8 and second.trials == 12
+    assert (first.resumed_trials, second.resumed_trials) == (0, 8)
     study = optuna.load_study(study_name=second.study_name, storage=storage)
     assert len(study.trials) == 12
+
+
+def test_a_fit_that_never_beats_its_start_says_so(temi_params):
+    problem = _linear_problem(temi_params)
+    space = fit_space(temi_params, ("Electrode height [m]",))
+    one = TPEOptimiser(n_trials=1, seed=0, progress=False).run(problem, space)
+    assert not one.improved and one.trials == 1
 
 
 def test_same_seed_gives_same_fit(temi_params):
