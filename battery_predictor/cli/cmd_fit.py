@@ -91,7 +91,8 @@ def run(args) -> int:
     problem = FitProblem(params=params, recordings=recs, simulator=simulator_named(args.simulator),
                          initial_state=args.initial_state)
     optimiser = TPEOptimiser(n_trials=args.trials, seed=args.seed, storage=storage, study_name=args.study_name,
-                             workers=args.workers, progress=not args.no_progress)
+                             workers=args.workers, progress=not args.no_progress,
+                             notice=lambda line: print(line, file=sys.stderr, flush=True))
     result = optimiser.run(problem, space)
     best = problem.evaluate(result.best_values)
     report = raw_identifiability(problem, space, result.best_values)
@@ -114,9 +115,6 @@ def run(args) -> int:
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")
-    if result.resumed_trials:
-        print(f"fit: resumed study {result.study_name!r} in {result.storage}: {result.resumed_trials} trials were "
-              "already done (pass --study-name NAME, or delete the storage file, to start afresh)", file=sys.stderr)
     if args.json:
         print_json({"method": "tpe", "r2_mod": best.r2_mod, "trials": result.trials,
                     "failed_trials": result.failed_trials, "resumed_trials": result.resumed_trials,
@@ -126,7 +124,8 @@ def run(args) -> int:
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
           f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s)")
     if not result.improved:
-        print("  no trial beat the starting values (trial 0): the fitted params equal the start")
+        print("  no trial beat the start (trial 0, the params' own values): the fitted params equal the start; "
+              "more --trials or other --parameters may help")
     for space_p in space:
         v = result.best_values[space_p.name]
         print(f"  {space_p.name:<58} {space_p.initial:>12.5g} -> {v:>12.5g}")

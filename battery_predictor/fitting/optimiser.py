@@ -18,7 +18,7 @@ import math
 import multiprocessing
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from battery_predictor.errors import BatteryPredictorError, SimulationError
@@ -76,6 +76,32 @@ def study_name_for(problem: FitProblem, space: Sequence[FitParameter]) -> str:
     return f"{problem.params.name}-{h.hexdigest()[:12]}"
 
 
+def resumed_study_message(study_name: str, storage: str | None, done: int, n_trials: int) -> str:
+    """One line telling a user that a fit resumes a stored study, and how to start afresh.
+
+    Parameters
+    ----------
+    study_name : str
+        Name of the resumed study.
+    storage : str or None
+        Its Optuna storage URL.
+    done : int
+        Finished trials the study already holds.
+    n_trials : int
+        Total trials asked for.
+    """
+    trials = f"{done} trial{'s' if done != 1 else ''}"
+    if done >= n_trials:
+        plan = f"no new trial runs (pass --trials N with N > {done} to continue)"
+    else:
+        plan = f"running {n_trials - done} more up to --trials {n_trials}"
+    afresh = "pass another --study-name"
+    if storage and storage.startswith("sqlite:///"):
+        afresh += f", or delete {storage[len('sqlite:///'):]}"
+    return (f"fit: resuming study {study_name!r} in {storage}: it already holds {trials}; {plan}. "
+            f"To start afresh, {afresh}.")
+
+
 def _objective_factory(problem: FitProblem, space: Sequence[FitParameter]):
     def objective(trial) -> float:
         values = {p.name: trial.suggest_float(p.name, p.low, p.high, log=p.log) for p in space}
@@ -131,10 +157,14 @@ class TPEOptimiser:
         Processes working on the study (needs an RDB storage when > 1).
     progress : bool
         Show a progress bar (trials, best R2_mod, ETA) on stderr.
+    notice : callable or None
+        Called with one line of text before any trial runs when the study already holds finished trials
+        (a resumed study: its name, storage, trial count and how to start afresh).
     """
 
     def __init__(self, n_trials: int = 1000, seed: int = 0, storage: str | None = None,
-                 study_name: str | None = None, workers: int = 1, progress: bool = True) -> None:
+                 study_name: str | None = None, workers: int = 1, progress: bool = True,
+                 notice: Callable[[str], None] | None = None) -> None:
         if n_trials < 1:
             raise BatteryPredictorError(f"--trials must be >= 1, got {n_trials}")
         if workers < 1:
@@ -147,6 +177,7 @@ class TPEOptimiser:
         self.study_name = study_name
         self.workers = workers
         self.progress = progress
+        self.notice = notice
 
     def run(self, problem: FitProblem, space: Sequence[FitParameter]) -> FitResult:
         """Run (or resume) the study and return the best values."""
@@ -168,6 +199,8 @@ class TPEOptimiser:
         if done == 0 and not study.get_trials(deepcopy=False):
             study.enqueue_trial({p.name: min(max(p.initial, p.low), p.high) for p in space})
         remaining = self.n_trials - done
+        if done and self.notice is not None:
+            self.notice(resumed_study_message(name, self.storage, done, self.n_trials))
         bar = None
         if self.progress and remaining > 0:
             from tqdm import tqdm

@@ -109,3 +109,50 @@ def test_wrong_sign_convention_is_rejected(tmp_path):
     path.write_text("time_s,voltage_V,current_A\n" + rows)
     proc = _run("simulate", "--params", "params/temi.yaml", "--data", str(path))
     _assert_one_line_error(proc, "neg.csv")
+
+
+@pytest.fixture(scope="module")
+def short_temi_csv(tmp_path_factory) -> Path:
+    """The first 30 min of the bundled temi recording as CSV (a fit on the engine takes ~2 s)."""
+    from battery_predictor.io.bags import read_recording_bag
+    from battery_predictor.recording import Recording
+
+    rec = read_recording_bag(REPO / "bags" / "temi_dynamic_pack1")
+    keep = rec.time_s <= 1800.0
+    short = Recording(time_s=rec.time_s[keep], voltage_v=rec.voltage_v[keep], current_a=rec.current_a[keep],
+                      temperature_k=None, source="short")
+    return save_csv(short, tmp_path_factory.mktemp("short") / "short.csv")
+
+
+def test_tpe_fit_says_when_no_trial_beat_the_start_and_names_a_resumed_study(short_temi_csv, tmp_path):
+    """Issue 13 item 4: a resumed study is named on stderr before the work; "X -> X" comes with a reason."""
+    out = tmp_path / "fit.yaml"
+    db = out.with_suffix(".optuna.db").resolve()
+
+    def fit(trials: int, *extra: str) -> subprocess.CompletedProcess:
+        return _run("fit", "--method", "tpe", "--params", "params/temi.yaml", "--data", str(short_temi_csv),
+                    "--simulator", "engine", "--parameters", "r_c_ohm", "--trials", str(trials), "--out", str(out),
+                    "--no-progress", *extra)
+
+    first = fit(1)  # the only trial is the enqueued start: nothing can beat it
+    assert first.returncode == 0, first.stderr
+    assert "no trial beat the start" in first.stdout
+    assert "resuming" not in first.stderr
+
+    second = fit(3)
+    assert second.returncode == 0, second.stderr
+    resumed = [ln for ln in second.stderr.splitlines() if "resuming study" in ln]
+    assert len(resumed) == 1, second.stderr
+    assert "already holds 1 trial;" in resumed[0] and "running 2 more" in resumed[0]
+    assert "--study-name" in resumed[0] and str(db) in resumed[0]
+
+    third = fit(3, "--json")  # nothing left to do: said so, and counted in the JSON
+    assert third.returncode == 0, third.stderr
+    assert "already holds 3 trials; no new trial runs (pass --trials N with N > 3" in third.stderr
+    obj = json.loads(third.stdout)
+    assert obj["resumed_trials"] == 3 and obj["trials"] == 3
+
+    afresh = fit(1, "--study-name", "another", "--json")
+    assert afresh.returncode == 0, afresh.stderr
+    assert "resuming" not in afresh.stderr
+    assert json.loads(afresh.stdout)["improved"] is False
