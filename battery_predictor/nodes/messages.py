@@ -10,16 +10,27 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from battery_predictor_msgs.msg import PackState, RemainingRuntime
+from battery_predictor_msgs.msg import PackState, PlannedRoute, RemainingRuntime, TaskResult
 from battery_predictor_msgs.msg import RouteSection as RouteSectionMsg
-from battery_predictor_msgs.srv import CanAcceptRoute
+from battery_predictor_msgs.msg import Task as TaskMsg
+from battery_predictor_msgs.srv import CanAcceptRoute, FeasibleTasks, PlanRoute
 from builtin_interfaces.msg import Time
 
-from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.errors import BatteryPredictorError, RequestError
 from battery_predictor.monitoring import PackSnapshot
 from battery_predictor.prediction.core import RuntimeStatus
+from battery_predictor.prediction.planning import CHARGE_FIRST, LEAST_CHARGE_PATH, SHORTEST, PlanRequest, RoutePlan
 from battery_predictor.prediction.route import MAX_SECTIONS, RouteDecision
+from battery_predictor.prediction.tasks import (
+    MAX_TASKS,
+    POLICY_GREEDY,
+    POLICY_INDEPENDENT,
+    POLICY_ORDERED,
+    Task,
+    TaskPlan,
+)
 from battery_predictor.profiles.ranger import DEFAULT_SPEED_M_S, RouteSection
+from battery_predictor.profiles.temi import INFORMATION, NAVIGATION
 
 #: Longer section names are shortened (they are echoed in reasons).
 MAX_NAME_CHARS = 80
@@ -124,4 +135,135 @@ def fill_route_response(response: CanAcceptRoute.Response, decision: RouteDecisi
     response.route_charge_ah = float(decision.route_charge_ah)
     response.state_of_charge = float(decision.state_of_charge)
     response.reason = str(decision.reason) or ("accepted" if decision.accepted else "rejected")
+    return response
+
+
+#: FeasibleTasks.srv policy constants -> policies of the ROS-free core, and back.
+POLICY_NAMES = {FeasibleTasks.Request.POLICY_INDEPENDENT: POLICY_INDEPENDENT,
+                FeasibleTasks.Request.POLICY_ORDERED: POLICY_ORDERED,
+                FeasibleTasks.Request.POLICY_GREEDY: POLICY_GREEDY}
+POLICY_CODES = {name: code for code, name in POLICY_NAMES.items()}
+#: Task.msg kind constants -> task kinds of the ROS-free core, and back.
+KIND_NAMES = {TaskMsg.KIND_INFORMATION: INFORMATION, TaskMsg.KIND_NAVIGATION: NAVIGATION}
+KIND_CODES = {name: code for code, name in KIND_NAMES.items()}
+#: PlannedRoute.msg kind constants of the planner's route kinds.
+ROUTE_KIND_CODES = {SHORTEST: PlannedRoute.KIND_SHORTEST, LEAST_CHARGE_PATH: PlannedRoute.KIND_LEAST_CHARGE_PATH,
+                    CHARGE_FIRST: PlannedRoute.KIND_CHARGE_FIRST}
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= MAX_NAME_CHARS else text[:MAX_NAME_CHARS] + "..."
+
+
+def task_policy(code: int) -> str:
+    """The core's policy name of a ``FeasibleTasks`` policy constant (RequestError when unknown)."""
+    policy = POLICY_NAMES.get(int(code))
+    if policy is None:
+        raise RequestError(f"policy {int(code)} is not one of POLICY_INDEPENDENT=0, POLICY_ORDERED=1, "
+                           "POLICY_GREEDY=2")
+    return policy
+
+
+def tasks_from_msgs(msgs: Sequence[TaskMsg]) -> list[Task]:
+    """Validated core tasks from a request.
+
+    ``duration_s == 0`` and ``current_a == 0`` mean "not given" (the walk to the destination, the
+    kind's mean current). A task without a name is named by its position.
+
+    Raises
+    ------
+    RequestError
+        With a one-line reason: too many tasks, an unknown kind, profile arrays of different
+        lengths, or a task the core rejects (NaN or negative duration, absurd current...).
+    """
+    if len(msgs) > MAX_TASKS:
+        raise RequestError(f"{len(msgs)} tasks (at most {MAX_TASKS})")
+    out = []
+    for k, m in enumerate(msgs, start=1):
+        name = _short(m.name if m.name.strip() else f"task {k}")
+        kind = KIND_NAMES.get(int(m.kind))
+        if kind is None:
+            raise RequestError(f"task {k} ({name!r}): kind {int(m.kind)} is not one of KIND_INFORMATION=0, "
+                               "KIND_NAVIGATION=1")
+        durations, currents = list(m.profile_duration_s), list(m.profile_current_a)
+        if len(durations) != len(currents):
+            raise RequestError(f"task {k} ({name!r}): profile_duration_s has {len(durations)} values but "
+                               f"profile_current_a {len(currents)}")
+        duration, current = float(m.duration_s), float(m.current_a)
+        try:
+            out.append(Task(name, kind, math.nan if duration == 0.0 else duration, _short(str(m.destination)),
+                            math.nan if current == 0.0 else current, tuple(zip(durations, currents))))
+        except BatteryPredictorError as exc:
+            raise RequestError(f"task {k}: {exc}") from None
+    return out
+
+
+def fill_feasible_tasks_response(response: FeasibleTasks.Response, plan: TaskPlan) -> FeasibleTasks.Response:
+    """Copy a core task plan into the service response."""
+    response.valid = bool(plan.valid)
+    response.policy = int(POLICY_CODES.get(plan.policy, 0))
+    response.results = [TaskResult(name=o.name, kind=int(KIND_CODES.get(o.kind, 0)), feasible=bool(o.feasible),
+                                   duration_s=float(o.duration_s), current_a=float(o.current_a),
+                                   end_voltage_v=float(o.end_voltage_v), return_voltage_v=float(o.return_voltage_v),
+                                   margin_v=float(o.margin_v), remaining_after_s=float(o.remaining_after_s),
+                                   end_location=str(o.end_location), reason=str(o.reason) or
+                                   ("feasible" if o.feasible else "not feasible"))
+                        for o in plan.outcomes]
+    response.feasible_count = int(plan.feasible_count)
+    response.more_guided_walks = int(min(max(plan.more_guided_walks, 0), 2**32 - 1))
+    response.walk_length_m = float(plan.walk_length_m)
+    response.more_information_s = float(plan.more_information_s)
+    response.summary = str(plan.summary)
+    response.state_of_charge = float(plan.state_of_charge)
+    response.cutoff_voltage_v = float(plan.cutoff_voltage_v)
+    response.reason = str(plan.reason) or ("valid" if plan.valid else "not valid")
+    return response
+
+
+def plan_request(request: PlanRoute.Request) -> PlanRequest:
+    """A validated core plan request (RequestError with the reason otherwise)."""
+    speed = float(request.speed_m_s)
+    try:
+        return PlanRequest(str(request.start_node), str(request.pickup), str(request.dropoff),
+                           float(request.payload_kg), bool(request.use_position), float(request.x_m),
+                           float(request.y_m), bool(request.ends_away_from_charger), float(request.loading_s),
+                           float(request.unloading_s), DEFAULT_SPEED_M_S if speed == 0.0 else speed)
+    except RequestError:
+        raise
+    except BatteryPredictorError as exc:
+        raise RequestError(str(exc)) from None
+
+
+def fill_plan_route_response(response: PlanRoute.Response, plan: RoutePlan, threshold_v: float
+                             ) -> PlanRoute.Response:
+    """Copy a core route plan into the service response."""
+    route = plan.route
+    response.start_node = str(plan.start_node)
+    response.approach_m = float(plan.approach_m)
+    response.threshold_voltage_v = float(threshold_v)
+    if route is None:
+        response.accepted = False
+        for attr in ("length_m", "predicted_voltage_v", "margin_v", "route_duration_s", "route_charge_ah",
+                     "state_of_charge"):
+            setattr(response, attr, math.nan)
+    else:
+        d = route.decision
+        response.accepted = bool(d.accepted)
+        response.nodes = list(route.nodes)
+        response.sections = route_section_msgs(route.sections)
+        response.length_m = float(route.length_m)
+        response.predicted_voltage_v = float(d.predicted_voltage_v)
+        response.threshold_voltage_v = float(d.threshold_voltage_v)
+        response.margin_v = float(d.margin_v)
+        response.route_duration_s = float(d.route_duration_s)
+        response.route_charge_ah = float(d.route_charge_ah)
+        response.state_of_charge = float(d.state_of_charge)
+    response.alternatives = [
+        PlannedRoute(kind=ROUTE_KIND_CODES[a.kind], feasible=bool(a.feasible), nodes=list(a.nodes),
+                     sections=route_section_msgs(a.sections), length_m=float(a.length_m),
+                     predicted_voltage_v=float(a.decision.predicted_voltage_v), margin_v=float(a.decision.margin_v),
+                     route_duration_s=float(a.decision.route_duration_s),
+                     route_charge_ah=float(a.decision.route_charge_ah), required_soc=float(a.required_soc),
+                     reason=str(a.reason)) for a in plan.alternatives]
+    response.reason = str(plan.reason) or ("accepted" if response.accepted else "rejected")
     return response

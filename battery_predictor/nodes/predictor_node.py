@@ -1,4 +1,4 @@
-"""``predictor``: remaining runtime on ``/remaining_runtime`` and the ``/can_accept_route`` service.
+"""``predictor``: remaining runtime on ``/remaining_runtime``; ``/can_accept_route``, ``/feasible_tasks``, ``/plan_route``.
 
 A thin adapter around :class:`battery_predictor.prediction.core.PredictorCore`
 (the fitted pack model from ``params_file``, the output of ``fit``):
@@ -12,6 +12,10 @@ A thin adapter around :class:`battery_predictor.prediction.core.PredictorCore`
   :meth:`PredictorCore.can_accept_route`. Invalid requests, unknown or stale
   state and model failures give ``accepted = false`` with a reason; the
   callback never raises.
+* ``feasible_tasks`` (``FeasibleTasks``, the information robot) and ``plan_route``
+  (``PlanRoute``, the luggage robot) -> :class:`~battery_predictor.prediction.station_services.StationServices`
+  with the route core; the maps come from ``station_file`` / ``task_map_file``. Malformed
+  requests are answered with the reason, never an exception.
 
 Threading: three mutually exclusive callback groups -- pack states, the runtime
 timer (the ~0.1 s model run), the service -- so with a
@@ -34,7 +38,7 @@ import time
 from collections import deque
 
 from battery_predictor_msgs.msg import PackState, RemainingRuntime
-from battery_predictor_msgs.srv import CanAcceptRoute
+from battery_predictor_msgs.srv import CanAcceptRoute, FeasibleTasks, PlanRoute
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
@@ -49,7 +53,17 @@ from battery_predictor.nodes._params import (
     resolve_params_file,
 )
 from battery_predictor.nodes._sync import TimerProbe
-from battery_predictor.nodes.messages import fill_route_response, remaining_runtime_msg, route_sections, stamp_to_s
+from battery_predictor.nodes.messages import (
+    fill_feasible_tasks_response,
+    fill_plan_route_response,
+    fill_route_response,
+    plan_request,
+    remaining_runtime_msg,
+    route_sections,
+    stamp_to_s,
+    task_policy,
+    tasks_from_msgs,
+)
 from battery_predictor.params_checks import check_node_voltages
 from battery_predictor.prediction.core import (
     PEAK_SOURCES,
@@ -61,7 +75,10 @@ from battery_predictor.prediction.core import (
 )
 from battery_predictor.prediction.load_estimate import ESTIMATORS
 from battery_predictor.prediction.pack_model import BACKENDS
+from battery_predictor.prediction.planning import RoutePlan
 from battery_predictor.prediction.route import RouteDecision, rejected
+from battery_predictor.prediction.station_services import StationServices, StationServicesConfig
+from battery_predictor.prediction.tasks import TaskPlan, invalid_plan
 
 #: A pack state this much older than the latest one restarts the predictor (time base restarted), s.
 TIME_BACK_RESET_S = 60.0
@@ -97,6 +114,7 @@ class PredictorNode(Node):
     def __init__(self, node_name: str = "predictor", *, core: PredictorCore | None = None, **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         self.config, topics, runtime_period_s = self._declare_parameters()
+        self.services_config = self._declare_station_parameters(topics)
         reject_undeclared(self)
         t0 = time.perf_counter()
         self.core = core if core is not None else PredictorCore(self.config)
@@ -120,12 +138,15 @@ class PredictorNode(Node):
             self.get_logger().info(f"pack model {self.core.params.name} from {self.core.params.source} loaded in "
                                    f"{time.perf_counter() - t0:.1f} s on {self.core.model_backend}; cut-off "
                                    f"{self.core.cutoff_voltage_v:.2f} V, {route}")
+        self.station_services = StationServices(self.services_config)
         self._lock = threading.Lock()
         self._monitor_stale = False
         self._monitor_stale_since_s = math.nan
         self.states_received = 0
         self.runtimes_published = 0
         self.routes_answered = 0
+        self.tasks_answered = 0
+        self.plans_answered = 0
         #: Wall-clock durations (s) of the last runtime updates and route answers.
         self.runtime_update_s: deque[float] = deque(maxlen=1000)
         self.route_latency_s: deque[float] = deque(maxlen=1000)
@@ -140,6 +161,10 @@ class PredictorNode(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics["diagnostics"], OUTPUT_QOS)
         self.route_service = self.create_service(CanAcceptRoute, topics["can_accept_route"], self._on_can_accept_route,
                                                  callback_group=self.service_group)
+        self.tasks_service = self.create_service(FeasibleTasks, topics["feasible_tasks"], self._on_feasible_tasks,
+                                                 callback_group=self.service_group)
+        self.plan_service = self.create_service(PlanRoute, topics["plan_route"], self._on_plan_route,
+                                                callback_group=self.service_group)
         self.runtime_probe = TimerProbe(self.get_clock())
         self.runtime_timer = self.create_timer(runtime_period_s, self.runtime_probe.wrap(self._on_runtime_timer),
                                                callback_group=self.runtime_group)
@@ -241,6 +266,26 @@ class PredictorNode(Node):
         )
         return config, topics, runtime_period_s
 
+    def _declare_station_parameters(self, topics: dict[str, str]) -> StationServicesConfig:
+        topics["feasible_tasks"] = declare_str(self, "feasible_tasks_service", "feasible_tasks",
+                                               "Service: battery_predictor_msgs/FeasibleTasks (information robot).")
+        topics["plan_route"] = declare_str(self, "plan_route_service", "plan_route",
+                                           "Service: battery_predictor_msgs/PlanRoute (luggage robot).")
+        return StationServicesConfig(
+            station_file=resolve_params_file(declare_str(
+                self, "station_file", "", "Station graph of the luggage robot for plan_route (nodes, edges of "
+                "segments with length and slope, optional node positions); empty = the bundled "
+                "minden_station.yaml.")),
+            task_map_file=resolve_params_file(declare_str(
+                self, "task_map_file", "", "Map of the information robot for feasible_tasks (same format); empty = "
+                "the bundled minden_information_map.yaml.")),
+            task_usage_file=resolve_params_file(declare_str(
+                self, "task_usage_file", "", "Usage model with the information robot's task currents and walking "
+                "speed; empty = the bundled temi_usage.yaml.")),
+            charger_node=declare_str(self, "charger_node", "charger", "Node of the charger on both maps."),
+            route_currents_file=self.config.route_currents_file,
+        )
+
     # --------------------------------------------------------------- helpers
     def _now_s(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
@@ -333,6 +378,43 @@ class PredictorNode(Node):
             self.routes_answered += 1
         return response
 
+    def answer_tasks(self, request: FeasibleTasks.Request) -> TaskPlan:
+        """The feasible-tasks answer at the present node time (never raises)."""
+        core = self.route_core
+        try:
+            policy = task_policy(request.policy)
+            tasks = tasks_from_msgs(request.tasks)
+        except Exception as exc:  # noqa: BLE001 - malformed input must never take the service down
+            return invalid_plan([], "independent", f"invalid request: {exc}", core.cutoff_voltage_v)
+        stale = self._stale_reason()
+        if stale is not None:
+            return invalid_plan(tasks, policy, f"state unknown: {stale}", core.cutoff_voltage_v)
+        return self.station_services.feasible_tasks(core, tasks, str(request.location), policy, self._now_s())
+
+    def _on_feasible_tasks(self, request: FeasibleTasks.Request,
+                           response: FeasibleTasks.Response) -> FeasibleTasks.Response:
+        fill_feasible_tasks_response(response, self.answer_tasks(request))
+        with self._lock:
+            self.tasks_answered += 1
+        return response
+
+    def answer_plan(self, request: PlanRoute.Request) -> RoutePlan:
+        """The planned route at the present node time (never raises)."""
+        try:
+            job = plan_request(request)
+        except Exception as exc:  # noqa: BLE001
+            return RoutePlan("", 0.0, None, (), f"invalid request: {exc}")
+        stale = self._stale_reason()
+        if stale is not None:
+            return RoutePlan("", 0.0, None, (), f"state unknown: {stale}")
+        return self.station_services.plan_route(self.route_core, job, self._now_s())
+
+    def _on_plan_route(self, request: PlanRoute.Request, response: PlanRoute.Response) -> PlanRoute.Response:
+        fill_plan_route_response(response, self.answer_plan(request), self.route_core.route_min_voltage_v)
+        with self._lock:
+            self.plans_answered += 1
+        return response
+
     def diagnostics(self) -> DiagnosticArray:
         """Model status, last runtime answer, runtime update time and service latency."""
         with self._lock:
@@ -341,7 +423,8 @@ class PredictorNode(Node):
             latencies = list(self.route_latency_s)
             values = [("states_received", str(self.states_received)),
                       ("runtimes_published", str(self.runtimes_published)),
-                      ("routes_answered", str(self.routes_answered))]
+                      ("routes_answered", str(self.routes_answered)),
+                      ("tasks_answered", str(self.tasks_answered)), ("plans_answered", str(self.plans_answered))]
         if self.core.runner is None:
             level, message = DiagnosticStatus.ERROR, f"no usable pack model: {self.core.model_error}"
         elif last is not None and not last.valid:

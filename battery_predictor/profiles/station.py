@@ -4,12 +4,17 @@ Nodes are named locations (``charger``, ``platform11_south``...), edges are
 undirected barrier-free paths made of segments with a length in m and a slope
 (``flat``, ``uphill`` or ``downhill`` in the edge's ``from -> to``
 direction). The luggage robot's routes follow shortest paths
-(:meth:`Station.shortest_path`, Dijkstra).
+(:meth:`Station.shortest_path`, Dijkstra) or the paths of least cost under any
+per-segment cost (:meth:`Station.least_cost_path`, e.g. the charge a payload
+draws). Nodes may carry a position (``x_m``, ``y_m`` in a local frame, m), so
+that a robot's position maps to the nearest node (:meth:`Station.nearest_node`).
 """
 
 from __future__ import annotations
 
 import heapq
+import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -137,12 +142,24 @@ class Station:
         Paths between nodes; both ends must be known nodes.
     source : str
         Where the graph came from (used in messages).
+    positions : dict, optional
+        Node name -> ``(x_m, y_m)`` in a local frame, m; nodes without one are never the nearest
+        node of a position.
     """
 
-    def __init__(self, nodes: dict[str, str], edges: tuple[Edge, ...] | list[Edge], source: str = "<memory>") -> None:
+    def __init__(self, nodes: dict[str, str], edges: tuple[Edge, ...] | list[Edge], source: str = "<memory>",
+                 positions: dict[str, tuple[float, float]] | None = None) -> None:
         self.nodes = dict(nodes)
         self.edges = tuple(edges)
         self.source = source
+        self.positions: dict[str, tuple[float, float]] = {}
+        for name, xy in (positions or {}).items():
+            if name not in self.nodes:
+                raise ProfileError(f"{source}: position given for unknown node {name!r}")
+            x, y = (float(v) for v in xy)
+            if not (math.isfinite(x) and math.isfinite(y)):
+                raise ProfileError(f"{source}: position of {name!r} is not finite")
+            self.positions[name] = (x, y)
         self._adjacent: dict[str, list[Edge]] = {name: [] for name in self.nodes}
         for edge in self.edges:
             for node in (edge.start, edge.end):
@@ -167,14 +184,33 @@ class Station:
         ProfileError
             If a node is unknown or ``goal`` cannot be reached.
         """
+        return self.least_cost_path(start, goal, lambda segment: segment.length_m)
+
+    def least_cost_path(self, start: str, goal: str, segment_cost: Callable[[Segment], float]) -> StationPath:
+        """Path of least total cost from ``start`` to ``goal`` (Dijkstra).
+
+        Parameters
+        ----------
+        start, goal : str
+            Node names.
+        segment_cost : callable
+            Cost of one segment in the direction of travel (``Segment -> float``, >= 0; e.g. its
+            length in m, or the charge in Ah a payload draws on it). Ties go to the first path found.
+
+        Raises
+        ------
+        ProfileError
+            If a node is unknown, ``goal`` cannot be reached, or a cost is negative or not finite.
+        """
         self.check_node(start)
         self.check_node(goal)
         best = {start: 0.0}
         previous: dict[str, tuple[str, Edge]] = {}
-        queue: list[tuple[float, str]] = [(0.0, start)]
+        queue: list[tuple[float, int, str]] = [(0.0, 0, start)]
+        pushed = 1
         done: set[str] = set()
         while queue:
-            distance, node = heapq.heappop(queue)
+            distance, _, node = heapq.heappop(queue)
             if node in done:
                 continue
             done.add(node)
@@ -182,11 +218,19 @@ class Station:
                 break
             for edge in self._adjacent[node]:
                 neighbour = edge.other(node)
-                candidate = distance + edge.length_m
+                cost = 0.0
+                for segment in edge.segments_from(node):
+                    c = float(segment_cost(segment))
+                    if not (math.isfinite(c) and c >= 0.0):
+                        raise ProfileError(f"{self.source}: segment cost {c!r} on {node}-{neighbour} "
+                                           "(must be finite and >= 0)")
+                    cost += c
+                candidate = distance + cost
                 if candidate < best.get(neighbour, float("inf")):
                     best[neighbour] = candidate
                     previous[neighbour] = (node, edge)
-                    heapq.heappush(queue, (candidate, neighbour))
+                    heapq.heappush(queue, (candidate, pushed, neighbour))
+                    pushed += 1
         if goal not in done:
             raise ProfileError(f"{self.source}: no path from {start} to {goal}")
         hops: list[tuple[str, Edge]] = []
@@ -204,6 +248,35 @@ class Station:
                 else:
                     segments.append(segment)
         return StationPath(tuple(nodes), tuple(segments))
+
+    def nearest_node(self, x_m: float, y_m: float) -> tuple[str, float]:
+        """The node nearest to the position ``(x_m, y_m)`` (m, the graph's frame) and its distance in m.
+
+        Raises
+        ------
+        ProfileError
+            If the position is not finite or the graph gives no node positions.
+        """
+        if not (math.isfinite(x_m) and math.isfinite(y_m)):
+            raise ProfileError(f"position ({x_m}, {y_m}) is not finite")
+        if not self.positions:
+            raise ProfileError(f"{self.source}: the station gives no node positions (x_m, y_m), so a position "
+                               "cannot be mapped to a node; name the node instead")
+        name, (x, y) = min(self.positions.items(), key=lambda kv: math.hypot(kv[1][0] - x_m, kv[1][1] - y_m))
+        return name, math.hypot(x - x_m, y - y_m)
+
+    def farthest_from(self, goal: str) -> tuple[str, float]:
+        """The node whose shortest path to ``goal`` is longest, and that length in m (reachable nodes only)."""
+        self.check_node(goal)
+        far, far_m = goal, 0.0
+        for node in self.nodes:
+            try:
+                d = self.distance_m(node, goal)
+            except ProfileError:
+                continue
+            if d > far_m:
+                far, far_m = node, d
+        return far, far_m
 
     def distance_m(self, start: str, goal: str) -> float:
         """Length in m of the shortest path from ``start`` to ``goal``."""
@@ -229,9 +302,23 @@ def load_station(path: str | Path | None = None) -> Station:
     """
     path, data = read_yaml_mapping(default_station_path() if path is None else path)
     check_unknown(data, {"nodes", "edges"}, path, "")
-    nodes = require(data, "nodes", path, "")
-    if not isinstance(nodes, dict) or not nodes:
+    nodes_data = require(data, "nodes", path, "")
+    if not isinstance(nodes_data, dict) or not nodes_data:
         raise ParamsError(f"{path}: nodes must be a non-empty mapping of name to description")
+    nodes: dict[str, str] = {}
+    positions: dict[str, tuple[float, float]] = {}
+    for name, value in nodes_data.items():
+        where = f"nodes.{name}"
+        if isinstance(value, dict):  # {description, x_m, y_m}
+            check_unknown(value, {"description", "x_m", "y_m"}, path, where)
+            nodes[str(name)] = str(value.get("description", ""))
+            if ("x_m" in value) != ("y_m" in value):
+                raise ParamsError(f"{path}: {where} needs both x_m and y_m (or neither)")
+            if "x_m" in value:
+                positions[str(name)] = (as_float(value["x_m"], path, f"{where}.x_m"),
+                                        as_float(value["y_m"], path, f"{where}.y_m"))
+        else:
+            nodes[str(name)] = str(value)
     edges_data = require(data, "edges", path, "")
     if not isinstance(edges_data, list):
         raise ParamsError(f"{path}: edges must be a list")
@@ -265,4 +352,4 @@ def load_station(path: str | Path | None = None) -> Station:
                 raise ParamsError(f"{path}: {seg_where}.slope is {slope!r}, expected one of {', '.join(SLOPES)}")
             segments.append(Segment(length, slope))
         edges.append(Edge(ends[0], ends[1], tuple(segments), str(item.get("source", ""))))
-    return Station({str(k): str(v) for k, v in nodes.items()}, edges, source=str(path))
+    return Station(nodes, edges, source=str(path), positions=positions)
