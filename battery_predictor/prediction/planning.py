@@ -335,7 +335,9 @@ class RoutePlanner:
             self.to_charger(start, approach_m, request.speed_m_s)
         if to_sections:
             leg = decide(to_sections, True, False)
-            leg_text = f"drive {_length(to_sections):.0f} m to the {self.charger} ({leg.reason})"
+            leg_text = f"drive {_length(to_sections):.0f} m to the {self.charger} (" + (
+                f"accepted, margin {leg.margin_v:+.2f} V, {leg.route_charge_ah:.2f} Ah)" if leg.accepted else
+                f"{leg.reason})")
         else:
             leg, leg_text = None, f"at the {self.charger}"
         job_nodes, job_sections = self.job(request, self.charger, 0.0, self.shortest)
@@ -356,8 +358,10 @@ class RoutePlanner:
                 a, b = (a, mid) if from_soc(job_sections, mid).accepted else (mid, b)
             required = b
         add = ""
-        if math.isfinite(present_soc) and math.isfinite(capacity_ah):
-            add = f" (now {present_soc:.3f}: +{max(required - present_soc, 0.0) * capacity_ah:.1f} Ah)"
+        if math.isfinite(present_soc) and math.isfinite(capacity_ah) and capacity_ah > 0:
+            leg_ah = leg.route_charge_ah if leg is not None and math.isfinite(leg.route_charge_ah) else 0.0
+            arrival = present_soc - leg_ah / capacity_ah
+            add = f" (about {arrival:.3f} on arrival: +{max(required - arrival, 0.0) * capacity_ah:.1f} Ah)"
         verdict = "feasible" if reached else "not feasible: the charger cannot be reached"
         reason = (f"charge first ({verdict}): {leg_text}, charge to SOC >= {required:.3f}{add}, then the job "
                   f"{' -> '.join(job_nodes)}, {_length(job_sections):.0f} m (on a full pack: "

@@ -1,0 +1,123 @@
+"""``/plan_route`` through the real monitor + predictor nodes (luggage robot, Ranger node params).
+
+``BatteryState`` samples put the pack at 49.8 V / 3 A (charged), then at 47.6 V / 1.7 A (in the
+LiFePO4 knee), then at 44.0 V / 3 A (below the route threshold), lock step on ``/clock``. A job
+from platform 13 north (pickup platform 11 south, drop-off platform 13 south, 80 kg) is planned
+over the middleware at each state: accepted on the charged pack; rejected in the knee with a
+feasible charge-first alternative (the drive to the charger accepted, the SOC to charge to);
+rejected below the threshold, the charger then unreachable too. A position maps to its nearest
+node; malformed requests are answered ``accepted = false`` with the reason; ``/can_accept_route``
+still answers beside it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import pytest
+from battery_predictor_msgs.msg import PlannedRoute
+from battery_predictor_msgs.srv import CanAcceptRoute, PlanRoute
+from rclpy.context import Context
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import BatteryState
+
+from battery_predictor.conventions import internal_current_to_battery_state
+from battery_predictor.nodes.messages import ns_to_stamp, route_section_msgs
+from battery_predictor.nodes.replay_session import ReplaySession
+from battery_predictor.profiles.ranger import longest_route
+from battery_predictor.replay import BagMessage, stream_from_messages
+
+pytestmark = pytest.mark.ros
+
+REPO = Path(__file__).resolve().parents[2]
+T0_NS = 1_704_067_200 * 10**9
+S = 10**9
+JOB = dict(start_node="platform13_north", pickup="platform11_south", dropoff="platform13_south", payload_kg=80.0)
+MALFORMED = {
+    "'platform99' is not a node": dict(JOB, start_node="platform99"),
+    "pickup and drop-off are both": dict(JOB, dropoff="platform11_south"),
+    "payload": dict(JOB, payload_kg=math.nan),
+    "500": dict(JOB, payload_kg=500.0),
+    "not on the station graph": dict(JOB, use_position=True, x_m=1e4, y_m=0.0),
+    "not finite": dict(JOB, use_position=True, x_m=math.inf, y_m=0.0),
+    "speed_m_s": dict(JOB, speed_m_s=-1.0),
+    "loading_s": dict(JOB, loading_s=math.inf),
+}
+
+
+def samples(start_s: float, end_s: float, voltage_v: float, current_a: float) -> list[BagMessage]:
+    out = []
+    for k in range(round(end_s - start_s)):
+        t_ns = T0_NS + round((start_s + k) * S)
+        msg = BatteryState(voltage=voltage_v, current=float(internal_current_to_battery_state(current_a)),
+                           temperature=25.0, present=True)
+        msg.header.stamp = ns_to_stamp(t_ns)
+        out.append(BagMessage(t_ns, "/battery_state", "sensor_msgs/msg/BatteryState", serialize_message(msg)))
+    return out
+
+
+def call(session: ReplaySession, request: PlanRoute.Request, timeout_s: float = 60.0) -> PlanRoute.Response:
+    """Call /plan_route over the middleware from the session's client node."""
+    client = session.client_node.create_client(PlanRoute, session.predictor.plan_service.srv_name)
+    try:
+        deadline = time.monotonic() + timeout_s
+        while not client.service_is_ready():
+            assert time.monotonic() < deadline, "plan_route service not discovered"
+            time.sleep(0.01)
+        future = client.call_async(request)
+        while not future.done():
+            assert time.monotonic() < deadline, "no plan_route response"
+            time.sleep(0.005)
+        return future.result()
+    finally:
+        session.client_node.destroy_client(client)
+
+
+def test_plan_route_valid_infeasible_and_malformed(ros_context: Context) -> None:
+    stream = stream_from_messages(samples(0.0, 30.0, 49.8, 3.0) + samples(30.0, 60.0, 47.6, 1.7)
+                                  + samples(60.0, 90.0, 44.0, 3.0), style="battery_state",
+                                  battery_topic="/battery_state")
+    with ReplaySession(stream, context=ros_context, params_file=str(REPO / "params/ros/ranger_nodes.yaml"),
+                       predictor_overrides={"runtime_period_s": 5.0}, rate=0) as session:
+        session.play_until(T0_NS + 29 * S)
+        t0 = time.perf_counter()
+        charged = call(session, PlanRoute.Request(**JOB))
+        latency_s = time.perf_counter() - t0
+        by_position = call(session, PlanRoute.Request(**dict(JOB, use_position=True, x_m=118.0, y_m=140.0)))
+        malformed = {key: call(session, PlanRoute.Request(**fields)) for key, fields in MALFORMED.items()}
+        route = session.call_route(CanAcceptRoute.Request(sections=route_section_msgs(longest_route(80.0).sections)))
+        session.play_until(T0_NS + 59 * S)
+        knee = call(session, PlanRoute.Request(**JOB))
+        session.play_until()
+        low = call(session, PlanRoute.Request(**JOB))
+    print(f"plan_route latency {latency_s * 1000:.0f} ms; knee: {knee.reason}")
+
+    assert charged.accepted and charged.margin_v > 0, charged.reason
+    assert list(charged.nodes) == ["platform13_north", "platform13_middle", "platform13_south", "platform11_south",
+                                   "platform13_south", "charger"]
+    assert charged.length_m == pytest.approx(295 + 420 + 420 + 280)
+    assert sum(s.length_m for s in charged.sections) == pytest.approx(charged.length_m)
+    assert {s.payload_kg for s in charged.sections if "platform11_south->platform13_south" in s.name} == {80.0}
+    assert charged.threshold_voltage_v == pytest.approx(46.31)
+    assert charged.predicted_voltage_v == pytest.approx(charged.threshold_voltage_v + charged.margin_v)
+    assert "accepted" in charged.reason and not charged.alternatives
+    assert by_position.start_node == "platform13_north" and 0 < by_position.approach_m < 10
+    assert by_position.sections[0].name == "approach to platform13_north"
+    assert route.accepted, route.reason
+
+    for key, answer in malformed.items():
+        assert not answer.accepted and "invalid request" in answer.reason and key in answer.reason, (key,
+                                                                                                    answer.reason)
+        assert not answer.alternatives and math.isnan(answer.margin_v)
+
+    assert not knee.accepted and knee.margin_v < 0, knee.reason
+    first = [a for a in knee.alternatives if a.kind == PlannedRoute.KIND_CHARGE_FIRST]
+    assert len(first) == 1 and first[0].feasible, knee.reason
+    assert 0.0 <= first[0].required_soc < 1.0 and "charge to SOC >=" in first[0].reason
+    assert list(first[0].nodes[:3]) == ["platform13_north", "platform13_middle", "platform13_south"]
+    assert "Instead: charge first" in knee.reason
+
+    assert not low.accepted and "already below the route threshold 46.31 V" in low.reason, low.reason
+    assert not any(a.feasible for a in low.alternatives), low.reason
