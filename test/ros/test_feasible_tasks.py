@@ -14,6 +14,7 @@ import math
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from battery_predictor_msgs.msg import Task
 from battery_predictor_msgs.srv import FeasibleTasks
@@ -76,6 +77,28 @@ MALFORMED = {
 }
 
 
+NUMBERS = [math.nan, math.inf, -math.inf, -1.0, 0.0, 1e-9, 0.5, 60.0, 3600.0, 1e9, 1e308, -1e308, 5e-324]
+N_FUZZ = 100
+
+
+def random_request(rng: np.random.Generator) -> FeasibleTasks.Request:
+    """A seeded random, mostly malformed request (within what the interface can carry)."""
+    def num(normal: float) -> float:
+        return float(rng.choice(NUMBERS)) if rng.random() < 0.3 else normal
+
+    tasks = []
+    for _ in range(int(rng.integers(0, 5)) if rng.random() > 0.05 else 100):
+        n = int(rng.integers(0, 4)) if rng.random() < 0.2 else 0
+        tasks.append(Task(name=str(rng.choice(["", "a", "ü→∂ 🚂", "x" * 80])),
+                          kind=int(rng.choice([0, 1, 2, 255])) if rng.random() < 0.2 else int(rng.integers(2)),
+                          duration_s=num(float(rng.uniform(0.0, 1800.0))),
+                          destination=str(rng.choice(["", "restroom", "entrance", "moon", "x" * 64])),
+                          current_a=num(0.0), profile_duration_s=[num(30.0) for _ in range(n)],
+                          profile_current_a=[num(2.0) for _ in range(n + int(rng.random() < 0.3))]))
+    return FeasibleTasks.Request(tasks=tasks, location=str(rng.choice(["", "entrance", "restroom", "nowhere"])),
+                                 policy=int(rng.choice([0, 1, 2, 3, 255])))
+
+
 def test_feasible_tasks_valid_infeasible_and_malformed(ros_context: Context) -> None:
     stream = stream_from_messages(relay(0.0, 60.0, 15.0, 1.7) + relay(60.0, 120.0, 13.45, 1.7), style="relay",
                                   battery_topic="/battery")
@@ -92,6 +115,9 @@ def test_feasible_tasks_valid_infeasible_and_malformed(ros_context: Context) -> 
                      for key, tasks in MALFORMED.items()}
         bad_location = call(session, FeasibleTasks.Request(tasks=TASKS[:1], location="platform 9 3/4"))
         bad_policy = call(session, FeasibleTasks.Request(tasks=TASKS[:1], policy=9))
+        rng = np.random.default_rng(14)
+        fuzz = [(req, call(session, req)) for req in (random_request(rng) for _ in range(N_FUZZ))]
+        after_fuzz = call(session, FeasibleTasks.Request(tasks=TASKS[:1], location="entrance"))
         session.play_until()
         low = call(session, FeasibleTasks.Request(tasks=TASKS, location="restroom"))
     print(f"feasible_tasks latency {latency_s * 1000:.0f} ms; {charged.summary}; low: {low.summary}")
@@ -115,6 +141,14 @@ def test_feasible_tasks_valid_infeasible_and_malformed(ros_context: Context) -> 
         assert key in text, (key, text)
     assert not bad_location.valid and "location 'platform 9 3/4' is not on the map" in bad_location.reason
     assert not bad_policy.valid and "policy 9" in bad_policy.reason
+    for req, answer in fuzz:  # every answer carries a reason; the service survives them all
+        assert answer.reason and all(r.reason for r in answer.results)
+        if req.policy > 2 or any(t.kind > 1 for t in req.tasks):
+            assert not answer.valid and not any(r.feasible for r in answer.results), answer.reason
+        for r in answer.results:
+            assert not r.feasible or (r.margin_v >= 0 and r.end_voltage_v > 13.30), r.reason
+    assert sum(a.valid for _, a in fuzz) > 5 and sum(not a.valid for _, a in fuzz) > 5
+    assert after_fuzz.valid and after_fuzz.results[0].feasible, after_fuzz.reason
 
     assert low.valid, low.reason
     assert not any(r.feasible for r in low.results), [r.reason for r in low.results]

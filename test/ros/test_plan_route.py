@@ -16,6 +16,7 @@ import math
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from battery_predictor_msgs.msg import PlannedRoute
 from battery_predictor_msgs.srv import CanAcceptRoute, PlanRoute
@@ -45,6 +46,24 @@ MALFORMED = {
     "speed_m_s": dict(JOB, speed_m_s=-1.0),
     "loading_s": dict(JOB, loading_s=math.inf),
 }
+
+
+NODES = ["charger", "platform13_north", "platform11_south", "platform13_south", "bus_stop", "", "x" * 64, "ü"]
+NUMBERS = [math.nan, math.inf, -math.inf, -1.0, 0.0, 1e-9, 0.5, 80.0, 199.9, 200.1, 1e9, 1e308, -1e308]
+N_FUZZ = 100
+
+
+def random_request(rng: np.random.Generator) -> PlanRoute.Request:
+    """A seeded random, mostly malformed request (within what the interface can carry)."""
+    def num(normal: float) -> float:
+        return float(rng.choice(NUMBERS)) if rng.random() < 0.3 else normal
+
+    return PlanRoute.Request(start_node=str(rng.choice(NODES)), use_position=bool(rng.random() < 0.3),
+                             x_m=num(float(rng.uniform(-50, 150))), y_m=num(float(rng.uniform(-150, 150))),
+                             pickup=str(rng.choice(NODES)), dropoff=str(rng.choice(NODES)),
+                             payload_kg=num(float(rng.choice([0.0, 20.0, 80.0]))),
+                             ends_away_from_charger=bool(rng.random() < 0.3), loading_s=num(60.0),
+                             unloading_s=num(60.0), speed_m_s=num(0.0))
 
 
 def samples(start_s: float, end_s: float, voltage_v: float, current_a: float) -> list[BagMessage]:
@@ -87,6 +106,9 @@ def test_plan_route_valid_infeasible_and_malformed(ros_context: Context) -> None
         latency_s = time.perf_counter() - t0
         by_position = call(session, PlanRoute.Request(**dict(JOB, use_position=True, x_m=118.0, y_m=140.0)))
         malformed = {key: call(session, PlanRoute.Request(**fields)) for key, fields in MALFORMED.items()}
+        rng = np.random.default_rng(14)
+        fuzz = [(req, call(session, req)) for req in (random_request(rng) for _ in range(N_FUZZ))]
+        after_fuzz = call(session, PlanRoute.Request(**JOB))
         route = session.call_route(CanAcceptRoute.Request(sections=route_section_msgs(longest_route(80.0).sections)))
         session.play_until(T0_NS + 59 * S)
         knee = call(session, PlanRoute.Request(**JOB))
@@ -111,6 +133,15 @@ def test_plan_route_valid_infeasible_and_malformed(ros_context: Context) -> None
         assert not answer.accepted and "invalid request" in answer.reason and key in answer.reason, (key,
                                                                                                     answer.reason)
         assert not answer.alternatives and math.isnan(answer.margin_v)
+
+    for req, answer in fuzz:  # every answer carries a reason; the service survives them all
+        assert answer.reason
+        if not (math.isfinite(req.payload_kg) and 0 <= req.payload_kg <= 200) or req.pickup == req.dropoff:
+            assert not answer.accepted and "invalid request" in answer.reason, answer.reason
+        if answer.accepted:
+            assert answer.margin_v >= 0 and answer.nodes[-1] in ("charger", req.dropoff), answer.reason
+    assert sum(a.accepted for _, a in fuzz) >= 1 and sum(not a.accepted for _, a in fuzz) > 50
+    assert after_fuzz.accepted, after_fuzz.reason
 
     assert not knee.accepted and knee.margin_v < 0, knee.reason
     first = [a for a in knee.alternatives if a.kind == PlannedRoute.KIND_CHARGE_FIRST]
