@@ -4,10 +4,12 @@
    true time until 13.30 V in its metadata) is replayed into ``battery_monitor``
    and ``predictor`` (``battery-predictor replay`` in-process, ``/clock`` from
    the bag, lock step); the remaining runtime published on ``/remaining_runtime``
-   after 30, 60, ..., 300 min is printed against the truth.
+   after 30, 60, ..., 300 min is printed against the truth; then ``/feasible_tasks``
+   is asked which of a few passengers' requests the robot can still take.
 2. Luggage robot (Ranger Mini): a bundled bag (BatteryState) is replayed up to a
    given time, and ``/can_accept_route`` is asked over the middleware for the
-   paper's longest route with 20, 40, 60 and 80 kg; the decisions are printed.
+   paper's longest route with 20, 40, 60 and 80 kg; the decisions are printed;
+   then ``/plan_route`` plans a job from where the robot stands.
 3. Where the figures come from: the bundled bags are emulated (made from the shipped params);
    the figures measured on real cells (``docs/runtime_real_data``, made by
    ``battery-predictor evaluate-runtime``) are printed beside them.
@@ -33,6 +35,12 @@ DEMO_RANGER_BAG = "ranger_stepwise_pack1"
 DEMO_RANGER_AT_MIN = 341.0
 REAL_DATA_SUMMARY = REPO / "docs" / "runtime_real_data" / "summary.json"
 PAYLOADS_KG = (20.0, 40.0, 60.0, 80.0)
+#: The passengers' requests of the feasible-tasks question: (name, kind, duration_s, destination).
+DEMO_TASKS = (("tickets and timetable", "information", 300.0, ""), ("guide to the restroom", "navigation", 0.0,
+              "restroom"), ("long conversation", "information", 2700.0, ""),
+              ("guide to the ticket machine", "navigation", 0.0, "ticket_machine"))
+#: The luggage job of the planning question.
+DEMO_JOB = dict(start_node="platform13_north", pickup="platform11_south", dropoff="platform13_south", payload_kg=80.0)
 
 
 def register(sub) -> None:
@@ -72,6 +80,73 @@ def _isolated_context():
     return context
 
 
+def _call(session, srv_type, srv_name: str, request, timeout_s: float = 60.0):
+    """Call a service of the session's predictor over the middleware from the session's client node."""
+    import time
+
+    from battery_predictor.errors import BatteryPredictorError
+
+    client = session.client_node.create_client(srv_type, srv_name)
+    try:
+        deadline = time.monotonic() + timeout_s
+        while not client.service_is_ready():
+            if time.monotonic() > deadline:
+                raise BatteryPredictorError(f"demo: service {srv_name} not found")
+            time.sleep(0.01)
+        future = client.call_async(request)
+        while not future.done():
+            if time.monotonic() > deadline:
+                raise BatteryPredictorError(f"demo: no answer from {srv_name}")
+            time.sleep(0.005)
+        return future.result()
+    finally:
+        session.client_node.destroy_client(client)
+
+
+def _feasible_tasks(session, at_min: float) -> list[str]:
+    """Ask /feasible_tasks for DEMO_TASKS at the entrance; the lines to print."""
+    from battery_predictor_msgs.msg import Task
+    from battery_predictor_msgs.srv import FeasibleTasks
+
+    kinds = {"information": Task.KIND_INFORMATION, "navigation": Task.KIND_NAVIGATION}
+    request = FeasibleTasks.Request(
+        tasks=[Task(name=n, kind=kinds[k], duration_s=d, destination=dest) for n, k, d, dest in DEMO_TASKS],
+        location="entrance", policy=FeasibleTasks.Request.POLICY_GREEDY)
+    r = _call(session, FeasibleTasks, session.predictor.tasks_service.srv_name, request)
+    lines = [f"   /feasible_tasks after {at_min:.0f} min, robot at the entrance, greedy (each task after those "
+             "accepted; the walk back to the charger must stay above the cut-off):"]
+    if not r.valid:
+        lines.append(f"   not valid: {r.reason}")
+    lines.append(f"   {'task':<28} {'min':>5} {'V at end':>9} {'margin':>8} {'left after':>11}  feasible")
+    for t in r.results:
+        lines.append(f"   {t.name:<28} {t.duration_s / 60:>5.1f} {t.end_voltage_v:>7.2f} V {t.margin_v:>+6.2f} V "
+                     f"{t.remaining_after_s / 60:>7.0f} min  {'yes' if t.feasible else 'no'}")
+    lines.append(f'   the robot says: "{r.summary}"')
+    lines.append(f"   ({r.reason})")
+    return lines
+
+
+def _plan_route(session) -> list[str]:
+    """Ask /plan_route for DEMO_JOB; the lines to print."""
+    from battery_predictor_msgs.msg import PlannedRoute
+    from battery_predictor_msgs.srv import PlanRoute
+
+    r = _call(session, PlanRoute, session.predictor.plan_service.srv_name, PlanRoute.Request(**DEMO_JOB))
+    lines = [f"   /plan_route: robot at {DEMO_JOB['start_node']}, {DEMO_JOB['payload_kg']:.0f} kg of luggage from "
+             f"{DEMO_JOB['pickup']} to {DEMO_JOB['dropoff']}, then back to the charger:",
+             f"   route {' -> '.join(r.nodes)} ({r.length_m:.0f} m, {len(r.sections)} sections, "
+             f"{r.route_duration_s / 60:.1f} min, {r.route_charge_ah:.2f} Ah)",
+             f"   {'accept' if r.accepted else 'reject'}: {r.predicted_voltage_v:.2f} V at the standstill current "
+             f"after it, threshold {r.threshold_voltage_v:.2f} V, margin {r.margin_v:+.2f} V"]
+    kinds = {PlannedRoute.KIND_SHORTEST: "shortest", PlannedRoute.KIND_LEAST_CHARGE_PATH: "least-charge path",
+             PlannedRoute.KIND_CHARGE_FIRST: "charge first"}
+    for a in r.alternatives:
+        soc = f", charge to SOC >= {a.required_soc:.3f}" if a.required_soc == a.required_soc else ""
+        lines.append(f"   alternative, {kinds.get(a.kind, a.kind)}: {'feasible' if a.feasible else 'not feasible'}{soc}")
+    lines.append(f"   reason: {r.reason}")
+    return lines
+
+
 def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -> None:
     from battery_predictor.cli.common import bag_progress, bag_step, progress_wanted
     from battery_predictor.io.paths import portable_paths
@@ -106,6 +181,7 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
             session.flush()
             points = session.runtime_points()
             rejected = session.monitor.monitor.rejected_total
+            task_lines = _feasible_tasks(session, (session.now_ns() - stream.start_ns) / 6e10)
     finally:
         output.close()
     checkpoints = compare_at_checkpoints(points, truth) if truth else []
@@ -121,6 +197,7 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
         e = error_summary(checkpoints)
         print(f"   MAE {e['mae_min']:.1f} min, max |error| {e['max_abs_error_min']:.1f} min, MAPE {e['mape_pct']:.1f} % "
               "(seed paper, real Temi: MAE 14.92 min, MAPE 18.9 %)")
+    print("\n".join(task_lines))
     print(f"   plot {png}; node outputs {out / 'temi_outputs'} (MCAP)\n")
 
 
@@ -156,7 +233,8 @@ def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
             print(f"   {kg:>5.0f} kg {'accept' if r.accepted else 'reject':>9} {r.predicted_voltage_v:>7.2f} V "
                   f"{r.threshold_voltage_v:>8.2f} V {r.margin_v:>+6.2f} V {r.route_charge_ah:>5.2f} Ah")
             reasons.append(f"{kg:.0f} kg: {r.reason}")
-    print("   reasons:\n     " + "\n     ".join(reasons))
+        print("   reasons:\n     " + "\n     ".join(reasons))
+        print("\n".join(_plan_route(session)))
 
 
 @contextlib.contextmanager
