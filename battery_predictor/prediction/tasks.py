@@ -110,7 +110,10 @@ class Task:
                                f"{MAX_PROFILE_POINTS})")
         profile = []
         for k, point in enumerate(self.profile):
-            d, i = (float(v) for v in point)
+            try:
+                d, i = (float(v) for v in point)
+            except (TypeError, ValueError):
+                raise RequestError(f"{where}: profile point {k} is {point!r} (must be (duration_s, current_a))") from None
             if not (math.isfinite(d) and 0.0 < d <= MAX_TASK_S):
                 raise RequestError(f"{where}: profile point {k} lasts {d!r} s (must be > 0 and <= "
                                    f"{MAX_TASK_S:.0f} s)")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -67,10 +68,11 @@ def fed_core(core, voltage_v: float, current_a: float = 1.7, seconds: int = 60, 
     (dict(kind="information", duration_s=60.0, current_a=1e4), "current_a is 10000.0"),
     (dict(kind="information", profile=((60.0, math.nan),)), "profile point 0 draws nan"),
     (dict(kind="information", profile=((0.0, 1.0),)), "profile point 0 lasts 0.0"),
+    (dict(kind="information", profile=((60.0,),)), "must be (duration_s, current_a)"),
     (dict(kind="information", profile=((60.0, 1.0),) * (MAX_PROFILE_POINTS + 1)), "at most 256"),
 ])
 def test_malformed_tasks_raise_request_error_with_the_reason(kwargs, match):
-    with pytest.raises(RequestError, match=match.replace("(", r"\(")):
+    with pytest.raises(RequestError, match=re.escape(match)):
         Task("t", **kwargs)
 
 
