@@ -22,6 +22,7 @@ from typing import Any
 import yaml
 
 from battery_predictor.errors import ParamsError
+from battery_predictor.ocp import cell_parameter_values, section_to_values, values_to_section
 
 #: Unit suffixes accepted on our own (non-PyBaMM) keys.
 UNIT_SUFFIXES = (
@@ -35,7 +36,7 @@ _TOP_LEVEL = ("name", "description", "pack", "cell", "interconnect", "thresholds
               "provenance")
 _PACK_KEYS = {"series": int, "parallel": int, "nominal_voltage_v": float, "nominal_capacity_ah": float,
               "min_voltage_v": float, "max_voltage_v": float}
-_CELL_KEYS = ("model", "base_parameter_set", "options", "manual", "fitted", "extra")
+_CELL_KEYS = ("model", "base_parameter_set", "options", "manual", "ocp", "fitted", "extra")
 _FIT_KEYS = ("parameters", "bounds")
 _UNIT_BRACKET = re.compile(r"^(?P<name>.*?)\s*\[(?P<unit>[^\]]*)\]\s*$")
 
@@ -148,6 +149,9 @@ class PackParams:
         PyBaMM model options (e.g. ``{"thermal": "lumped"}``).
     manual, fitted : dict
         PyBaMM ``"Name [unit]"`` values set by hand, and fitted values (fitted wins).
+    ocp : dict
+        A measured positive-electrode OCP as the scalars of :mod:`battery_predictor.ocp` (empty: the
+        base set's OCP); ``ocp_source`` says where it was measured.
     interconnect : dict
         ``r_b_ohm``, ``r_c_ohm``, ``r_i_ohm``, ``r_t_ohm`` in Ohm.
     thresholds, operating, pack_info : dict
@@ -171,6 +175,8 @@ class PackParams:
     manual: dict[str, float] = field(default_factory=dict)
     fitted: dict[str, float] = field(default_factory=dict)
     extra: dict[str, float] = field(default_factory=dict)
+    ocp: dict[str, float] = field(default_factory=dict)
+    ocp_source: str = ""
     interconnect: dict[str, float] = field(default_factory=dict)
     thresholds: dict[str, float] = field(default_factory=dict)
     operating: dict[str, float] = field(default_factory=dict)
@@ -189,8 +195,9 @@ class PackParams:
 
     @property
     def cell_values(self) -> dict[str, float]:
-        """PyBaMM values that differ from the base set (manual, then fitted, then extension extras)."""
+        """PyBaMM values that differ from the base set (manual, measured OCP, fitted, extension extras)."""
         out = dict(self.manual)
+        out.update(self.ocp)
         out.update(self.fitted)
         out.update(self.extra)
         return out
@@ -220,11 +227,7 @@ class PackParams:
 
     def parameter_values(self):
         """PyBaMM ``ParameterValues``: base set updated with manual, fitted and extension values."""
-        import pybamm
-
-        pv = pybamm.ParameterValues(self.base_parameter_set)
-        pv.update(self.cell_values, check_already_exists=False)
-        return pv
+        return cell_parameter_values(self.base_parameter_set, self.cell_values)
 
     def with_values(self, updates: Mapping[str, float], **changes: Any) -> PackParams:
         """Return a copy with fit-parameter values replaced (PyBaMM keys go to ``fitted``)."""
@@ -257,6 +260,8 @@ class PackParams:
             "fit": {"parameters": list(self.fit.parameters)},
             "extensions": list(self.extensions),
         }
+        if self.ocp:
+            out["cell"]["ocp"] = values_to_section(self.ocp, self.ocp_source)
         if self.extra:
             out["cell"]["extra"] = dict(self.extra)
         if self.fit.bounds:
@@ -358,6 +363,12 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
             check_pybamm_key(str(key), base, source, frozenset(extra))
             values[sec][str(key)] = _as_float(val, source, f"cell.{sec}.{key}")
 
+    ocp_raw = cell.get("ocp") or {}
+    if not isinstance(ocp_raw, Mapping):
+        raise ParamsError(f"{source}: key 'cell.ocp' must be a mapping (see battery_predictor/ocp.py)")
+    ocp = section_to_values(ocp_raw, source)
+    ocp_source = str((ocp_raw.get("positive") or {}).get("source", "")) if ocp else ""
+
     inter_raw = _section(data, "interconnect", source, required=False)
     interconnect = {"r_b_ohm": 1e-4, "r_c_ohm": 1e-2, "r_i_ohm": 1e-2, "r_t_ohm": 1e-5}
     for key, val in inter_raw.items():
@@ -419,6 +430,8 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
         manual=values["manual"],
         fitted=values["fitted"],
         extra=extra,
+        ocp=ocp,
+        ocp_source=ocp_source,
         interconnect=interconnect,
         thresholds=thresholds,
         operating=operating,

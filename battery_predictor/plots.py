@@ -44,3 +44,33 @@ def plot_voltage_fit(recordings: Sequence, results: Sequence, path: str | Path, 
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def ocv_figure(soc: Sequence[float], measured_v: Sequence[float], model_v: Sequence[float], *, title: str):
+    """Measured vs model open-circuit voltage against state of charge (a matplotlib ``Figure``).
+
+    Parameters
+    ----------
+    soc : sequence of float
+        State of charge, 0..1.
+    measured_v, model_v : sequence of float
+        Cell open-circuit voltage in V, measured and from the model's OCPs.
+    title : str
+        Figure title.
+    """
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 5.5))
+    top, bottom = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    top.plot(soc, measured_v, color="black", lw=1.4, label="measured")
+    top.plot(soc, model_v, color="tab:red", lw=1.0, ls="--", label="model OCPs")
+    top.set_ylabel("open-circuit voltage [V]")
+    top.grid(alpha=0.3)
+    top.legend(loc="best", fontsize=8)
+    bottom.plot(soc, 1000 * (np.asarray(model_v) - np.asarray(measured_v)), color="tab:red", lw=1.0)
+    bottom.set_xlabel("state of charge")
+    bottom.set_ylabel("model - measured [mV]")
+    bottom.grid(alpha=0.3)
+    fig.suptitle(title, fontsize=10)
+    return fig

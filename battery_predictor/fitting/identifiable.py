@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from battery_predictor.errors import ParamsError, SimulationError
+from battery_predictor.ocp import cell_parameter_values
 from battery_predictor.params import INTERCONNECT_KEYS, PackParams
 from battery_predictor.recording import Recording
 
@@ -280,8 +281,7 @@ def initial_ocv_coordinates(params: PackParams, recordings: Sequence[Recording])
 def _ocp_table(base_parameter_set: str, cell_values: tuple, electrode: str, temperature_k: float) -> np.ndarray:
     import pybamm
 
-    pv = pybamm.ParameterValues(base_parameter_set)
-    pv.update(dict(cell_values), check_already_exists=False)
+    pv = cell_parameter_values(base_parameter_set, dict(cell_values))
     key = f"{_ELECTRODES[electrode]} electrode OCP [V]"
     fn = pv[key]
     if not callable(fn):
@@ -292,6 +292,11 @@ def _ocp_table(base_parameter_set: str, cell_values: tuple, electrode: str, temp
         temperature_k)}
     sym = pybamm.FunctionParameter(key, args)
     return np.asarray(pv.process_symbol(sym).evaluate(), dtype=float).ravel()
+
+
+def sto_grid() -> np.ndarray:
+    """The stoichiometry grid (dimensionless) on which :func:`ocp_curves` tabulates the OCPs."""
+    return _STO_GRID.copy()
 
 
 def ocp_curves(params: PackParams, temperature_k: float = 298.15) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,164 @@
+"""A measured open-circuit potential as a smooth series: the one formula, in NumPy and PyBaMM form.
+
+A cell's positive-electrode OCP can come from a measurement (see
+:mod:`battery_predictor.fitting.ocv`) instead of the base parameter set. It is stored as
+
+.. math::
+
+    U(s) = a + b\\,s + \\sum_k c_k \\tanh\\!\\left(\\frac{s - m_k}{w_k}\\right)
+
+with the stoichiometry ``s``. The series is smooth, has a closed form (so PyBaMM's code printer and
+the engine's compiled kernel handle it like the published OCPs, which have the same form), and
+its terms are plain scalars: they live among the cell's PyBaMM values under the keys of
+:func:`series_keys`, so every cache keyed on the cell values sees them. :func:`series_value` is the
+formula; :func:`pybamm_ocp` and :func:`evaluate` call it with PyBaMM's or NumPy's ``tanh``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from battery_predictor.errors import ParamsError
+
+#: PyBaMM key of the OCP a series replaces.
+POSITIVE_OCP_KEY = "Positive electrode OCP [V]"
+#: Prefix of the scalar keys that hold the series.
+PREFIX = "Positive electrode OCP series"
+CONSTANT_KEY = f"{PREFIX} constant [V]"
+SLOPE_KEY = f"{PREFIX} slope [V]"
+#: Most terms a series may have (the YAML is checked against it).
+MAX_TERMS = 64
+
+
+def series_keys(n_terms: int) -> list[str]:
+    """Scalar keys of a series with ``n_terms`` terms (constant, slope, then centre/width/coefficient per term)."""
+    keys = [CONSTANT_KEY, SLOPE_KEY]
+    for k in range(n_terms):
+        keys += [f"{PREFIX} centre {k:02d}", f"{PREFIX} width {k:02d}", f"{PREFIX} coefficient {k:02d} [V]"]
+    return keys
+
+
+def n_terms(values: Mapping[str, Any]) -> int:
+    """Number of series terms among ``values`` (0 when no series is present)."""
+    return sum(1 for key in values if key.startswith(f"{PREFIX} coefficient "))
+
+
+def has_series(values: Mapping[str, Any]) -> bool:
+    """True when ``values`` hold a positive-OCP series."""
+    return CONSTANT_KEY in values
+
+
+def series_value(sto, values: Mapping[str, Any], tanh: Callable):
+    """The series at stoichiometry ``sto`` (V), with ``tanh`` from NumPy or PyBaMM.
+
+    Parameters
+    ----------
+    sto : array_like or pybamm.Symbol
+        Positive-electrode stoichiometry (dimensionless).
+    values : mapping
+        The series' scalars by :func:`series_keys` (numbers, or PyBaMM parameters).
+    tanh : callable
+        ``numpy.tanh`` or ``pybamm.tanh``.
+    """
+    out = values[CONSTANT_KEY] + values[SLOPE_KEY] * sto
+    for k in range(n_terms(values)):
+        centre = values[f"{PREFIX} centre {k:02d}"]
+        width = values[f"{PREFIX} width {k:02d}"]
+        out = out + values[f"{PREFIX} coefficient {k:02d} [V]"] * tanh((sto - centre) / width)
+    return out
+
+
+def evaluate(values: Mapping[str, float], sto: np.ndarray) -> np.ndarray:
+    """The series (V) at the stoichiometries ``sto``, in NumPy."""
+    return np.asarray(series_value(np.asarray(sto, dtype=float), values, np.tanh), dtype=float)
+
+
+def pybamm_ocp(count: int) -> Callable:
+    """PyBaMM OCP function ``U(sto)`` of a ``count``-term series whose scalars are PyBaMM parameters."""
+    import pybamm
+
+    params = {key: pybamm.Parameter(key) for key in series_keys(count)}
+
+    def positive_ocp_series(sto):
+        return series_value(sto, params, pybamm.tanh)
+
+    return positive_ocp_series
+
+
+def apply_series(pv, values: Mapping[str, Any]) -> None:
+    """Point ``pv``'s positive OCP at the series held in ``values`` (no-op without one)."""
+    if has_series(values):
+        pv.update({POSITIVE_OCP_KEY: pybamm_ocp(n_terms(values))}, check_already_exists=False)
+
+
+def cell_parameter_values(base_parameter_set: str, cell_values: Mapping[str, float]):
+    """PyBaMM ``ParameterValues``: ``base_parameter_set`` updated with ``cell_values`` (and their series).
+
+    The one place a params file's cell values become PyBaMM values.
+    """
+    import pybamm
+
+    pv = pybamm.ParameterValues(base_parameter_set)
+    pv.update(dict(cell_values), check_already_exists=False)
+    apply_series(pv, cell_values)
+    return pv
+
+
+# ----------------------------------------------------------------------------- YAML form
+def section_to_values(section: Mapping[str, Any], source: str) -> dict[str, float]:
+    """The scalar keys of a ``cell.ocp`` YAML section.
+
+    The section is ``{positive: {constant_v, slope_v, centres, widths, coefficients_v, source}}``.
+    """
+    unknown = set(section) - {"positive"}
+    if unknown:
+        raise ParamsError(f"{source}: unknown key 'cell.ocp.{sorted(unknown)[0]}' (allowed: positive)")
+    pos = section.get("positive")
+    if pos is None:
+        return {}
+    if not isinstance(pos, Mapping):
+        raise ParamsError(f"{source}: key 'cell.ocp.positive' must be a mapping")
+    allowed = {"constant_v", "slope_v", "centres", "widths", "coefficients_v", "source"}
+    for key in pos:
+        if key not in allowed:
+            raise ParamsError(f"{source}: unknown key 'cell.ocp.positive.{key}' (allowed: {', '.join(sorted(allowed))})")
+    try:
+        constant, slope = float(pos["constant_v"]), float(pos["slope_v"])
+        centres, widths, coefs = ([float(x) for x in pos[k]] for k in ("centres", "widths", "coefficients_v"))
+    except KeyError as exc:
+        raise ParamsError(f"{source}: missing key 'cell.ocp.positive.{exc.args[0]}'") from None
+    except (TypeError, ValueError):
+        raise ParamsError(f"{source}: key 'cell.ocp.positive': constant_v and slope_v must be numbers, "
+                          "centres, widths and coefficients_v lists of numbers") from None
+    if not (len(centres) == len(widths) == len(coefs)) or len(centres) > MAX_TERMS:
+        raise ParamsError(f"{source}: key 'cell.ocp.positive': centres, widths and coefficients_v must have the "
+                          f"same length (at most {MAX_TERMS}), got {len(centres)}, {len(widths)}, {len(coefs)}")
+    numbers = [constant, slope, *centres, *widths, *coefs]
+    if not all(np.isfinite(numbers)) or any(w <= 0 for w in widths):
+        raise ParamsError(f"{source}: key 'cell.ocp.positive': values must be finite and widths > 0")
+    values = {CONSTANT_KEY: constant, SLOPE_KEY: slope}
+    for k, (m, w, c) in enumerate(zip(centres, widths, coefs)):
+        values[f"{PREFIX} centre {k:02d}"] = m
+        values[f"{PREFIX} width {k:02d}"] = w
+        values[f"{PREFIX} coefficient {k:02d} [V]"] = c
+    return values
+
+
+def values_to_section(values: Mapping[str, float], source: str = "") -> dict[str, Any]:
+    """The ``cell.ocp`` YAML section of the series in ``values`` (empty without one)."""
+    if not has_series(values):
+        return {}
+    count = n_terms(values)
+    pos: dict[str, Any] = {
+        "constant_v": float(values[CONSTANT_KEY]),
+        "slope_v": float(values[SLOPE_KEY]),
+        "centres": [float(values[f"{PREFIX} centre {k:02d}"]) for k in range(count)],
+        "widths": [float(values[f"{PREFIX} width {k:02d}"]) for k in range(count)],
+        "coefficients_v": [float(values[f"{PREFIX} coefficient {k:02d} [V]"]) for k in range(count)],
+    }
+    if source:
+        pos["source"] = source
+    return {"positive": pos}
