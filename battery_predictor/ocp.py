@@ -107,6 +107,14 @@ def cell_parameter_values(base_parameter_set: str, cell_values: Mapping[str, flo
     return pv
 
 
+def ocp_origin(params) -> str:
+    """Where the params' OCPs come from, for reports: ``"OCPs of Chen2020"`` or the measured positive's source."""
+    if has_series(params.ocp):
+        source = f" ({params.ocp_source})" if params.ocp_source else ""
+        return f"measured positive OCP{source}, negative OCP of {params.base_parameter_set}"
+    return f"OCPs of {params.base_parameter_set}"
+
+
 # ----------------------------------------------------------------------------- YAML form
 def section_to_values(section: Mapping[str, Any], source: str) -> dict[str, float]:
     """The scalar keys of a ``cell.ocp`` YAML section.

@@ -35,6 +35,9 @@ def register(sub) -> None:
     p.add_argument("--peak-source", choices=("window", "sample"), default=None,
                    help="which load peaks stop the pack: 5 s window means or single samples "
                         "(default: the predictor's default, see the node parameter peak_source)")
+    p.add_argument("--load-model", choices=("power", "current"), default=None,
+                   help="what of the average load stays constant ahead (default: the predictor's, power; see the "
+                        "node parameter load_model)")
     p.add_argument("--out", default=None, metavar="DIR", help="write summary.json, checkpoints.json and plots here")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_input_check_arguments(p)
@@ -92,8 +95,9 @@ def run(args) -> int:
         if not known:
             raise InputDataError("--capacity-from: none of these recordings ends at the cut-off")
         capacities["measured"] = sum(known) / len(known)
+    options = {"peak_source": args.peak_source, "load_model": args.load_model}
     config = PredictorConfig(params_file=str(params.source), cutoff_voltage_v=cutoff_v,
-                             **({"peak_source": args.peak_source} if args.peak_source else {}))
+                             **{k: v for k, v in options.items() if v})
     results = []
     for path in args.data:
         res = ev.evaluate_recording(params, load(path), cutoff_v=cutoff_v, capacities_ah=capacities,
@@ -102,7 +106,8 @@ def run(args) -> int:
         if not args.json:
             _print_recording(res, list(capacities))
     summary = ev.summarise(results, list(capacities))
-    summary.update({"params": str(params.source), "cutoff_v": cutoff_v, "peak_source": config.peak_source, "capacities_ah": capacities,
+    summary.update({"params": str(params.source), "cutoff_v": cutoff_v, "peak_source": config.peak_source,
+                    "load_model": config.load_model, "capacities_ah": capacities,
                     "checkpoints": list(checkpoints), "seconds": time.perf_counter() - tic})
     if out_dir is not None:
         _write_outputs(out_dir, summary, results)
@@ -170,7 +175,7 @@ def report_markdown(summary: dict) -> str:
     lines = ["# Remaining runtime on measured recordings", "",
              f"Made by `battery-predictor {' '.join(shlex.quote(a) for a in sys.argv[1:])}`", "",
              f"Params `{Path(summary['params']).name}`, cut-off {summary['cutoff_v']:.2f} V, peaks from "
-             f"{summary['peak_source']}s, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
+             f"{summary['peak_source']}s, constant {summary['load_model']} ahead, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
              "discharge. Counter capacities: " + ", ".join(f"{k} {v:.3f} Ah" for k, v in summary["capacities_ah"].items())
              + ". MAE / bias in min; worst late % = the largest error relative to the true remaining time after "
              f"{summary['late_after_fraction']:.0%} of the discharge.", "", head,

@@ -8,6 +8,7 @@ import warnings
 from pathlib import Path
 
 from battery_predictor.cli.common import check_output_file, check_plot_file, data_options, load_data, print_json
+from battery_predictor.ocp import ocp_origin
 
 
 def simulator_named(name: str):
@@ -96,7 +97,7 @@ def run_identify(args) -> int:
                     "out": str(out), "plot": str(plot_path)})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
-          f"({result.evaluations} evaluations, {result.seconds:.0f} s; OCPs of {params.base_parameter_set})")
+          f"({result.evaluations} evaluations, {result.seconds:.0f} s; {ocp_origin(params)})")
     for c in space:
         print(f"  {c.name:<34} {c.initial:>12.5g} -> {result.coordinates[c.name]:>12.5g}   "
               f"[{c.low:.4g}, {c.high:.4g}]{' log' if c.log else ''}")

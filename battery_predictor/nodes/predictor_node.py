@@ -66,6 +66,7 @@ from battery_predictor.nodes.messages import (
 )
 from battery_predictor.params_checks import check_node_voltages
 from battery_predictor.prediction.core import (
+    LOAD_MODELS,
     PEAK_SOURCES,
     STATUS_MODEL_FAILED,
     STATUS_STALE_INPUT,
@@ -221,6 +222,10 @@ class PredictorNode(Node):
                                        "Average load of the present cycle: 'cycle' (mean since the cycle began, "
                                        "the paper's) or 'ewma' (exponentially weighted, load_time_constant_s).",
                                        ESTIMATORS),
+            load_model=declare_str(self, "load_model", PredictorConfig.load_model,
+                                   "What of the average load stays constant ahead: 'power' (the current rises as "
+                                   "the pack voltage falls, as behind DC-DC converters and drives) or 'current' "
+                                   "(the paper's).", LOAD_MODELS),
             load_time_constant_s=declare_float(self, "load_time_constant_s", _core_default("load_time_constant_s"),
                                                "Time constant of the 'ewma' load estimator, s.", 1.0, 86400.0),
             state_tolerance_v_per_cell=declare_float(

@@ -15,6 +15,11 @@ Two estimators of the average load, both time-weighted over the 5 s window avera
   by its weight so that it equals the cycle mean while the cycle is young; it follows a change of
   usage within a cycle at the price of more noise.
 
+Both estimate the mean power (W, from the window voltages) the same way: a robot's drives and
+electronics behind DC-DC converters draw a power, not a current, so the current of a repeated task
+rises as the pack voltage falls (measured: the repeated drive cycles of the Panasonic 18650PF draw a
+constant mean power while their mean current rises by 15 %; docs/runtime_real_data).
+
 The recurring load peak is a quantile of the cycle's window currents (see ``PredictorConfig``).
 """
 
@@ -40,6 +45,8 @@ class LoadEstimate:
     ----------
     mean_current_a : float
         Estimated average net pack current in A (positive = discharge); NaN before two samples.
+    mean_power_w : float
+        Estimated average net pack power in W (positive = discharge); NaN without voltages.
     duration_s : float
         Length of the present cycle covered by samples, s.
     charging : bool
@@ -53,6 +60,7 @@ class LoadEstimate:
     duration_s: float
     charging: bool
     charging_current_a: float
+    mean_power_w: float = math.nan
 
 
 class LoadEstimator:
@@ -85,6 +93,7 @@ class LoadEstimator:
         self._in_session = False
         self._last_stamp_s: float | None = None
         self._last_current_a = 0.0
+        self._last_power_w = math.nan
         self._reset_cycle()
 
     def _reset_cycle(self) -> None:
@@ -93,11 +102,16 @@ class LoadEstimator:
         self._duration_s = 0.0
         self._ewma_sum = 0.0
         self._ewma_weight = 0.0
+        self._energy_ws = 0.0
+        self._power_duration_s = 0.0
+        self._ewma_power_sum = 0.0
+        self._ewma_power_weight = 0.0
         self.currents: deque[float] = deque(maxlen=20000)
         self.peaks: deque[float] = deque(maxlen=20000)
 
-    def add(self, stamp_s: float, current_a: float, peak_current_a: float = math.nan) -> bool:
-        """Take a window (s, mean A positive = discharge, largest sample A or NaN).
+    def add(self, stamp_s: float, current_a: float, peak_current_a: float = math.nan,
+            voltage_v: float = math.nan) -> bool:
+        """Take a window (s, mean A positive = discharge, largest sample A or NaN, mean V or NaN).
 
         Returns True when a charging session just began.
         """
@@ -105,8 +119,10 @@ class LoadEstimator:
         if self._last_stamp_s is not None and stamp_s > self._last_stamp_s:
             dt = min(stamp_s - self._last_stamp_s, MAX_GAP_S)
         previous = self._last_current_a
+        previous_power = self._last_power_w
         self._last_stamp_s = stamp_s
         self._last_current_a = current_a
+        self._last_power_w = current_a * voltage_v
         was_in_session = self._in_session
         began = self._track_charging(dt, previous, current_a)
         if self._in_session:
@@ -122,6 +138,11 @@ class LoadEstimator:
             decay = math.exp(-dt / self.time_constant_s)
             self._ewma_sum = self._ewma_sum * decay + previous * (1.0 - decay)
             self._ewma_weight = self._ewma_weight * decay + (1.0 - decay)
+            if math.isfinite(previous_power):
+                self._energy_ws += dt * previous_power
+                self._power_duration_s += dt
+                self._ewma_power_sum = self._ewma_power_sum * decay + previous_power * (1.0 - decay)
+                self._ewma_power_weight = self._ewma_power_weight * decay + (1.0 - decay)
         self.currents.append(current_a)
         self.peaks.append(peak_current_a if math.isfinite(peak_current_a) else current_a)
         return began
@@ -150,10 +171,12 @@ class LoadEstimator:
         """The present estimate."""
         if self.estimator == "ewma":
             mean = self._ewma_sum / self._ewma_weight if self._ewma_weight > 0 else math.nan
+            power = self._ewma_power_sum / self._ewma_power_weight if self._ewma_power_weight > 0 else math.nan
         else:
             mean = self._charge_as / self._duration_s if self._duration_s > 0 else math.nan
+            power = self._energy_ws / self._power_duration_s if self._power_duration_s > 0 else math.nan
         charging = self._in_session and self._last_current_a < -self.charge_current_a
-        return LoadEstimate(mean, self._duration_s, charging, self._last_current_a if charging else math.nan)
+        return LoadEstimate(mean, self._duration_s, charging, self._last_current_a if charging else math.nan, power)
 
     def quantile_a(self, q: float, *, of_peaks: bool = False) -> float:
         """Quantile ``q`` of the cycle's window currents (or of each window's largest sample), A.

@@ -1,9 +1,11 @@
 """Remaining runtime (paper 5.1.5, steps 2-3).
 
-From the calibrated SOC, the pack is simulated under the average current of the
-present discharge cycle at the last measured temperature; the remaining runtime
-is the time until the pack voltage reaches the robot's cut-off (13.30 V for the
-information robot) or a cell reaches its lower cut-off, whichever comes first.
+From the calibrated SOC, the pack is simulated under the average load of the present discharge
+cycle at the last measured temperature; the remaining runtime is the time until the pack voltage
+reaches the robot's cut-off (13.30 V for the information robot) or a cell reaches its lower
+cut-off, whichever comes first. The average load is a constant current (the paper's) or a
+constant power (:func:`constant_power_run`: the current rises as the voltage falls, as it does
+behind the robots' DC-DC converters and drives).
 """
 
 from __future__ import annotations
@@ -75,16 +77,99 @@ def peak_voltage_drop_v(runner: PackRunner, start, average_current_a: float, pea
     return max(0.0, float(np.mean(a.pack_voltage_v) - np.mean(b.pack_voltage_v)))
 
 
-def peak_crossing_s(runner: PackRunner, start, average_current_a: float, peak_current_a: float,
+#: Step (s) of the piecewise-constant current that follows a constant power.
+POWER_STEP_S = 60.0
+#: Fixed-point passes of :func:`constant_power_run` at most, and the current change (relative) that ends them.
+POWER_PASSES = 10
+POWER_TOLERANCE = 0.002
+#: ... and the change of the time to the cut-off (s) that ends them.
+POWER_END_TOLERANCE_S = 30.0
+
+
+@dataclass(frozen=True)
+class LoadPath:
+    """The average load ahead as piecewise-constant pack currents.
+
+    Attributes
+    ----------
+    step_s : float
+        Length of every step, s.
+    current_a : numpy.ndarray
+        Pack current of each step in A (positive = discharge).
+    """
+
+    step_s: float
+    current_a: np.ndarray
+
+    @classmethod
+    def constant(cls, current_a: float, horizon_s: float) -> LoadPath:
+        """One constant current for ``horizon_s``."""
+        return cls(float(horizon_s), np.array([float(current_a)]))
+
+    def segments(self, until_s: float) -> list[tuple[float, float]]:
+        """``[(duration_s, current_a), ...]`` covering the first ``until_s`` s."""
+        out, t = [], 0.0
+        for cur in self.current_a:
+            if t >= until_s - 1e-9:
+                break
+            out.append((min(self.step_s, until_s - t), float(cur)))
+            t += self.step_s
+        if t < until_s - 1e-9:
+            out.append((until_s - t, float(self.current_a[-1])))
+        return out
+
+    def current_at(self, time_s: float) -> float:
+        """Pack current (A) at ``time_s`` s."""
+        k = min(int(time_s // self.step_s), len(self.current_a) - 1)
+        return float(self.current_a[max(k, 0)])
+
+
+def constant_power_run(runner: PackRunner, start, power_w: float, horizon_s: float, temperature_k: float,
+                       first_voltage_v: float, cutoff_voltage_v: float):
+    """The pack under a constant discharge power: ``(run, LoadPath)``.
+
+    The current of each :data:`POWER_STEP_S` step is ``power_w`` over the pack voltage the
+    previous pass simulated in that step (the first pass divides by ``first_voltage_v``), until
+    the currents before the pack reaches ``cutoff_voltage_v`` (but for the last two steps, which
+    follow the crossing time) change by less than :data:`POWER_TOLERANCE` (relative) and the
+    crossing time by less than :data:`POWER_END_TOLERANCE_S`. After the crossing the currents do
+    not matter to the runtime (beyond a cell's cut-off the voltage and so the current run away).
+
+    Raises
+    ------
+    SimulationError
+        The passes do not settle (the pack cannot deliver the power).
+    """
+    n = max(1, int(math.ceil(horizon_s / POWER_STEP_S)))
+    mid = (np.arange(n) + 0.5) * POWER_STEP_S
+    path = LoadPath(POWER_STEP_S, np.full(n, power_w / first_voltage_v))
+    last_end_s = math.inf
+    for _ in range(POWER_PASSES):
+        run = runner.run(start, path.segments(horizon_s), temperature_k)
+        t_end = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
+        t_end = float(run.end_time_s) if t_end is None else t_end
+        v = np.interp(mid, run.time_s, run.pack_voltage_v)  # held at the last value after the run ends
+        v = np.maximum(v, 0.5 * cutoff_voltage_v)
+        new = LoadPath(POWER_STEP_S, power_w / v)
+        before = mid < t_end - 2 * POWER_STEP_S  # the steps at the knee follow the crossing time
+        change = np.abs(new.current_a[before] - path.current_a[before]) / new.current_a[before]
+        settled = change.size == 0 or float(change.max()) < POWER_TOLERANCE
+        if settled and abs(t_end - last_end_s) <= POWER_END_TOLERANCE_S:
+            return run, path
+        path, last_end_s = new, t_end
+    raise SimulationError(f"the constant-power load ({power_w:.1f} W) did not settle in {POWER_PASSES} passes")
+
+
+def peak_crossing_s(runner: PackRunner, start, average: LoadPath, peak_factor: float,
                     temperature_k: float, cutoff_voltage_v: float, average_run, *, settle_s: float = 5.0,
                     tolerance_s: float = 30.0, max_runs: int = 16) -> float | None:
     """First time (s) at which a load peak, drawn from the average-load trajectory, pulls the pack to the cut-off.
 
-    ``g(t)`` = mean pack voltage over ``settle_s`` at ``peak_current_a`` after ``t`` s at
-    ``average_current_a``, minus the cut-off; its root is bracketed between 0 and the
-    average-load crossing (where ``g < 0`` since the peak draws more) and found with Brent's
-    method on at most ``max_runs`` model runs (to ``tolerance_s``). The first guess is the
-    average-load trajectory lowered by the peak's extra drop at the present state.
+    ``g(t)`` = mean pack voltage over ``settle_s`` at ``peak_factor`` times the average current
+    of time ``t``, after ``t`` s of the average load, minus the cut-off; its root is bracketed
+    between 0 and the average-load crossing (where ``g < 0`` since the peak draws more) and found
+    with Brent's method on at most ``max_runs`` model runs (to ``tolerance_s``). The first guess is
+    the average-load trajectory lowered by the peak's extra drop at the present state.
 
     Returns None when no crossing exists before the end of ``average_run``.
 
@@ -95,8 +180,8 @@ def peak_crossing_s(runner: PackRunner, start, average_current_a: float, peak_cu
         runs: never a made-up time.
     """
     def g(t_s: float) -> float:
-        run = runner.run(start, ([(t_s, average_current_a)] if t_s > 1.0 else []) + [(settle_s, peak_current_a)],
-                         temperature_k)
+        prefix = average.segments(t_s) if t_s > 1.0 else []
+        run = runner.run(start, prefix + [(settle_s, peak_factor * average.current_at(t_s))], temperature_k)
         if run.reached_cutoff:
             return -1.0  # a cell reaches its cut-off during the peak: the robot stops here
         peak_part = run.time_s >= run.time_s[-1] - settle_s + 1e-9
@@ -109,7 +194,8 @@ def peak_crossing_s(runner: PackRunner, start, average_current_a: float, peak_cu
         return None
     if g(0.0) <= 0.0:
         return 0.0
-    drop_v = peak_voltage_drop_v(runner, start, average_current_a, peak_current_a, temperature_k, settle_s)
+    first_a = average.current_at(0.0)
+    drop_v = peak_voltage_drop_v(runner, start, first_a, peak_factor * first_a, temperature_k, settle_s)
     guess = time_to_voltage_s(average_run.time_s, average_run.pack_voltage_v, cutoff_voltage_v + drop_v)
     lo, hi = 0.0, float(t_avg)
     if guess is not None and 0.0 < guess < hi:  # tighten the bracket with the first guess
@@ -133,7 +219,8 @@ def peak_crossing_s(runner: PackRunner, start, average_current_a: float, peak_cu
 def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: float, temperature_k: float,
                               average_current_a: float, cutoff_voltage_v: float,
                               calibration: Calibration | None = None,
-                              peak_current_a: float | None = None, peak_duration_s: float = 5.0) -> RuntimePrediction:
+                              peak_current_a: float | None = None, peak_duration_s: float = 5.0,
+                              average_power_w: float | None = None) -> RuntimePrediction:
     """Calibrate the SOC (unless given), then simulate the average load to the cut-off.
 
     Parameters
@@ -152,28 +239,39 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
         Recurring load peak of the present cycle (A). The robot stops when a *measured* 5 s window
         reaches the cut-off, which happens at a load peak, not at the average load: the runtime is
         the first time a peak drawn from the average-load trajectory reaches the cut-off
-        (:func:`peak_crossing_s`), not when the average load does (the paper's strategy).
+        (:func:`peak_crossing_s`), not when the average load does (the paper's strategy). Under a
+        constant power the peak keeps its ratio to the average current.
     peak_duration_s : float
         How long a peak lasts in the model, s: the monitor's window for a peak of window means, a
         sample's length for the largest sample of a window.
+    average_power_w : float, optional
+        Average discharge power of the present cycle in W (> 0): the load ahead is this constant
+        power (:func:`constant_power_run`) instead of ``average_current_a``.
     """
     if not (math.isfinite(average_current_a) and average_current_a > 0):
         raise SimulationError(f"average discharge current must be > 0 A, got {average_current_a}")
+    if average_power_w is not None and not (math.isfinite(average_power_w) and average_power_w > 0):
+        raise SimulationError(f"average discharge power must be > 0 W, got {average_power_w}")
     cal = calibration if calibration is not None else calibrate_soc(runner, voltage_v, current_a, temperature_k)
     if voltage_v <= cutoff_voltage_v:
         return RuntimePrediction(0.0, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
     charge_left_ah = max(cal.soc - runner.soc_bounds[0], 0.02) * runner.capacity_ah
     horizon_s = min(MAX_HORIZON_S, 1.5 * charge_left_ah * 3600.0 / average_current_a + 3600.0)
-    run = runner.run(cal.start, [(horizon_s, average_current_a)], temperature_k)
+    if average_power_w is None:
+        path = LoadPath.constant(average_current_a, horizon_s)
+        run = runner.run(cal.start, path.segments(horizon_s), temperature_k)
+    else:
+        run, path = constant_power_run(runner, cal.start, average_power_w, horizon_s, temperature_k, voltage_v,
+                                       cutoff_voltage_v)
+    assumed_a = path.current_at(0.0)
     if peak_current_a is not None and peak_current_a > average_current_a:
-        t_peak = peak_crossing_s(runner, cal.start, average_current_a, float(peak_current_a), temperature_k,
+        t_peak = peak_crossing_s(runner, cal.start, path, float(peak_current_a) / average_current_a, temperature_k,
                                  cutoff_voltage_v, run, settle_s=peak_duration_s)
         if t_peak is not None:
-            return RuntimePrediction(t_peak, cal, average_current_a, temperature_k, cutoff_voltage_v, "peak_cutoff")
+            return RuntimePrediction(t_peak, cal, assumed_a, temperature_k, cutoff_voltage_v, "peak_cutoff")
     t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
     if t_pack is not None:
-        return RuntimePrediction(t_pack, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
+        return RuntimePrediction(t_pack, cal, assumed_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
     if run.reached_cutoff:
-        return RuntimePrediction(run.end_time_s, cal, average_current_a, temperature_k, cutoff_voltage_v,
-                                 "cell_cutoff")
-    return RuntimePrediction(horizon_s, cal, average_current_a, temperature_k, cutoff_voltage_v, "horizon")
+        return RuntimePrediction(run.end_time_s, cal, assumed_a, temperature_k, cutoff_voltage_v, "cell_cutoff")
+    return RuntimePrediction(horizon_s, cal, assumed_a, temperature_k, cutoff_voltage_v, "horizon")

@@ -84,7 +84,8 @@ def model_discharge_csv(tmp_path_factory) -> Path:
 def test_cli_scores_the_predictor_and_the_counters_on_a_discharge(model_discharge_csv, tmp_path):
     out = tmp_path / "report"
     proc = subprocess.run([str(CLI), "evaluate-runtime", "--params", str(PARAMS), "--data", str(model_discharge_csv),
-                           "--checkpoints", "0.2:0.8:0.3", "--capacity-ah", "2.6", "--json", "--out", str(out)],
+                           "--checkpoints", "0.2:0.8:0.3", "--capacity-ah", "2.6", "--load-model", "current",
+                           "--json", "--out", str(out)],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
@@ -92,7 +93,8 @@ def test_cli_scores_the_predictor_and_the_counters_on_a_discharge(model_discharg
     assert set(pooled) == {"predictor", "counter[nominal]", "counter[given]"}
     assert pooled["predictor"]["answered"] == pooled["predictor"]["checkpoints"] == 3
     discharge_min = summary["per_recording"][0]["discharge_min"]
-    assert pooled["predictor"]["mae_min"] < 0.05 * discharge_min  # its own model: close to the truth
+    assert pooled["predictor"]["mae_min"] < 0.05 * discharge_min  # its own model and load kind: close to the truth
+    assert summary["load_model"] == "current"
     assert (out / "summary.json").is_file() and (out / "runtime.png").stat().st_size > 1000
     assert "| **pooled** |" in (out / "report.md").read_text()
     rows = json.loads((out / "checkpoints.json").read_text())

@@ -105,3 +105,27 @@ def test_regen_on_a_measured_drive_cycle_does_not_reset_the_load_estimate():
     estimate = est.estimate().mean_current_a
     assert estimate == pytest.approx(net_mean_a(t[discharge], i[discharge]), rel=1e-9)
     assert 1.0 < estimate < 3.0  # a US06 cell load, not a few seconds' worth
+
+
+def test_mean_power_is_time_weighted_from_the_window_voltages():
+    est = LoadEstimator(0.2)
+    for t, i, v in [(0.0, 1.0, 10.0), (100.0, 1.25, 8.0), (200.0, 0.0, 9.0), (300.0, 1.0, 10.0)]:
+        est.add(t, i, math.nan, v)
+    load = est.estimate()
+    assert load.mean_power_w == pytest.approx((10.0 + 10.0 + 0.0) / 3)
+    assert load.mean_current_a == pytest.approx((1.0 + 1.25 + 0.0) / 3)
+    no_voltage = LoadEstimator(0.2)
+    feed(no_voltage, [0.0, 10.0], [1.0, 1.0])
+    assert math.isnan(no_voltage.estimate().mean_power_w)
+
+
+@pytest.mark.skipif(not PANASONIC.is_dir(), reason="measured data not available (../shared/data)")
+def test_repeated_drive_cycles_draw_a_constant_power_not_a_constant_current():
+    rec = load_recording(PANASONIC / "drive_T25C_HWFET.csv")
+    t, i, v = rec.time_s - rec.time_s[0], rec.current_a, rec.voltage_v
+    period_s = 1536.0  # one repetition of the file's drive pattern (its autocorrelation peak)
+    first, last = t < period_s, (t >= 3 * period_s) & (t < 4 * period_s)
+    current = [float(np.mean(i[m])) for m in (first, last)]
+    power = [float(np.mean((i * v)[m])) for m in (first, last)]
+    assert current[1] / current[0] > 1.1  # the current rises as the voltage falls ...
+    assert power[1] / power[0] == pytest.approx(1.0, abs=0.01)  # ... at a constant power
