@@ -29,9 +29,11 @@ def register(sub) -> None:
     p.add_argument("--budget", type=int, default=None,
                    help="model evaluations of each observed-data fit, baseline and candidates alike (default 80)")
     p.add_argument("--reference-budget", type=int, default=None,
-                   help="model evaluations of the reference fit (default 150)")
+                   help="model evaluations of the reference identification ('fit --method identify' on the SPM "
+                        "engine; default 1000)")
     p.add_argument("--fit-fraction", type=float, default=0.6,
-                   help="fraction (in time) of each observed recording used for fitting; the rest is held out")
+                   help="fraction of each observed recording's discharge throughput (Ah, rests, soaks and recharges not "
+                        "counted) in its fit part; the rest is held out (default 0.6)")
     p.add_argument("--split", choices=("auto", "time", "recordings"), default="auto",
                    help="hold-out: 'time' fits on the first --fit-fraction of every observed recording; "
                         "'recordings' fits once per recording on all other recordings whole plus the first "
@@ -45,6 +47,13 @@ def register(sub) -> None:
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
                    help="average every recording over time windows of SECONDS (dense data such as 1 s drive cycles)")
     add_input_check_arguments(p)
+    # diagnose keeps the last row of a repeated timestamp by default (cycler exports repeat the time at
+    # step changes; the later row is the start of the new step): a documented default, not an error
+    for action in p._actions:
+        if action.dest == "duplicate_times":
+            action.default = "keep_last"
+            action.help = ("CSV rows that repeat a timestamp: keep the last row of each repeated time (default "
+                           "for diagnose: the later row starts the new step), keep the first, or reject ('error')")
     p.add_argument("--seed", type=int, default=0, help="seed of the multistart points (default 0)")
     p.add_argument("--workers", type=int, default=None,
                    help="processes for the candidate fits and the reference fit's Jacobian (default: CPUs, at most 4)")
@@ -91,7 +100,7 @@ def run(args) -> int:
                     fit_fraction=args.fit_fraction, causes=args.causes, seed=args.seed,
                     progress=None if args.quiet else default_progress, workers=args.workers, split=args.split)
     out = diag.to_json()
-    if args.write_params:
+    if args.write_params and diag.judged:
         from dataclasses import replace
 
         extended = diag.extended_params()
@@ -118,6 +127,10 @@ def run(args) -> int:
         return 0
     print(f"cause: {diag.cause}")
     print(diag.evidence)
+    if not diag.judged:
+        if args.write_params:
+            print("no params written: nothing was judged")
+        return 0
     print(f"baseline held-out RMSE {diag.baseline.heldout_rmse_mV:.1f} mV; extended ({diag.extended.cause}) "
           f"{diag.extended.heldout_rmse_mV:.1f} mV; gain {diag.gain_pct:.1f} %")
     for c in diag.candidates:

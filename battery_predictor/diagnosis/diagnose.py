@@ -58,21 +58,24 @@ from battery_predictor.diagnosis.engine import (
     Engine,
     Observed,
     SimOut,
-    is_mesh_free,
     observe,
     soc_from_voltage,
 )
-from battery_predictor.diagnosis.lsq import ParallelEvaluator, budgeted_least_squares
+from battery_predictor.diagnosis.lsq import budgeted_least_squares
+from battery_predictor.diagnosis.reference import (
+    DEFAULT_IDENTIFY_BUDGET,
+    ReferenceFit,
+    identify_reference,
+    reference_verdict,
+)
 from battery_predictor.diagnosis.residuals import ResidualAnalysis, analyse_residuals
 from battery_predictor.diagnosis.scoring import (
     fit_residual,
     held_out_score,
     noise_level_v,
-    padded_prediction,
     pooled,
 )
 from battery_predictor.errors import BatteryPredictorError, InputDataError
-from battery_predictor.fitting.space import FitParameter, fit_space
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording
 
@@ -100,8 +103,12 @@ RESTORE_MIN_GAIN_PCT = 30.0
 #: count). 40 left a three-parameter capacity fade (LLI 13 %, LAM 1-3 %) in a wrong basin: held-out
 #: 325 mV instead of 8 mV at 80, for 1.6 s more wall time.
 DEFAULT_BUDGET = 80
-#: Default evaluation budget of the reference fit.
-DEFAULT_REFERENCE_BUDGET = 150
+#: Default evaluation budget of the reference fit (the identification on the SPM engine,
+#: :mod:`battery_predictor.diagnosis.reference`).
+DEFAULT_REFERENCE_BUDGET = DEFAULT_IDENTIFY_BUDGET
+#: The cause reported when the reference fit is too poor to judge any candidate
+#: (:func:`~battery_predictor.diagnosis.reference.reference_verdict`): neither a cause nor ``none``.
+NOT_JUDGED = "not_judged"
 #: Candidates whose excess held-out error (above the noise) is within this factor of the lowest, plus
 #: :data:`NEAR_NOISE_FRACTION` of the noise, are not separable; the simplest of them is named.
 SEPARABILITY_FACTOR = 1.10
@@ -154,19 +161,6 @@ class CandidateResult:
 
 
 @dataclass
-class ReferenceFit:
-    """Outcome of the baseline fit on the reference data."""
-
-    values: dict[str, float]
-    socs: list[float]
-    rmse_mV: float
-    initial_rmse_mV: float
-    evaluations: int
-    skipped: list[str]
-    seconds: float
-
-
-@dataclass
 class Diagnosis:
     """Result of :func:`diagnose`; :meth:`to_json` gives the CLI's JSON object."""
 
@@ -187,6 +181,8 @@ class Diagnosis:
     separable_with: list[str] = field(default_factory=list)
     split: str = "time"
     temperature_shift_k: float | None = None
+    #: False when the reference fit was too poor to judge candidates (``cause == NOT_JUDGED``).
+    judged: bool = True
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -199,11 +195,8 @@ class Diagnosis:
             "residuals": self.residuals.to_json(),
             "noise_mV": self.noise_mV,
             "not_separable_from": list(self.separable_with),
-            "reference_fit": None if self.reference is None else {
-                "rmse_mV": self.reference.rmse_mV, "initial_rmse_mV": self.reference.initial_rmse_mV,
-                "evaluations": self.reference.evaluations, "values": self.reference.values,
-                "initial_soc": self.reference.socs,
-                "not_fitted": self.reference.skipped, "seconds": self.reference.seconds},
+            "reference_fit": None if self.reference is None else self.reference.to_json(),
+            "judged": self.judged,
             "budget": self.budget,
             "fit_fraction": self.fit_fraction,
             "split": self.split,
@@ -247,18 +240,29 @@ def near_lowest(valid: Sequence[CandidateResult], noise_mv: float) -> list[Candi
     return [r for r in valid if excess_mv(r.heldout_rmse_mV, noise_mv) <= margin]
 
 
-def choose_best(valid: Sequence[CandidateResult], noise_mv: float) -> CandidateResult | None:
+def choose_best(valid: Sequence[CandidateResult], noise_mv: float,
+                measured_first: Sequence[str] = ()) -> CandidateResult | None:
     """The simplest candidate whose excess held-out error is within the margin of the lowest one.
 
     Excess errors closer than :data:`SEPARABILITY_FACTOR` (plus :data:`NEAR_NOISE_FRACTION` of the
     noise) do not tell two causes apart; the one that changes the model least
     (:data:`SIMPLICITY_ORDER`) is named, e.g. a contact resistance before the SPMe, whose
-    electrolyte resistance also grows the ohmic drop.
+    electrolyte resistance also grows the ohmic drop. Causes in ``measured_first`` come first among
+    the inseparable ones: a cause the measurements show directly (a measured temperature unlike the
+    reference's, :data:`MEASURED_SHIFT_K`) is named before a hidden one that predicts as well.
     """
     near = near_lowest(valid, noise_mv)
     if not near:
         return None
-    return min(near, key=lambda r: (SIMPLICITY_ORDER.index(r.cause), r.heldout_rmse_mV))
+    return min(near, key=lambda r: (r.cause not in measured_first, SIMPLICITY_ORDER.index(r.cause),
+                                    r.heldout_rmse_mV))
+
+
+#: Observed recordings whose mean measured temperature differs from the references' by more than this
+#: (K) put ``temperature`` first among candidates that predict equally well (:func:`choose_best`). 5 K
+#: changes an Arrhenius rate with a typical battery activation energy (20-50 kJ/mol) by 15-40 %, far
+#: beyond the +-1 K of a chamber or of the self-heating difference between reference runs.
+MEASURED_SHIFT_K = 5.0
 
 
 def claim_allowed(base_rmse_mv: float, best_rmse_mv: float, noise_mv: float, floor_mv: float) -> bool:
@@ -288,102 +292,6 @@ def _log(progress: Callable[[str], None] | None, msg: str) -> None:
 def default_progress(msg: str) -> None:
     """Print a progress line on stderr."""
     print(f"[diagnose] {msg}", file=sys.stderr, flush=True)
-
-
-# --------------------------------------------------------------------------- reference fit
-def _unit(p: FitParameter, u: float) -> float:
-    u = min(max(float(u), 0.0), 1.0)
-    if p.log:
-        return math.exp(math.log(p.low) + u * (math.log(p.high) - math.log(p.low)))
-    return p.low + u * (p.high - p.low)
-
-
-def _from_value(p: FitParameter, v: float) -> float:
-    v = min(max(float(v), p.low), p.high)
-    if p.log:
-        return (math.log(v) - math.log(p.low)) / (math.log(p.high) - math.log(p.low))
-    return (v - p.low) / (p.high - p.low)
-
-
-def reference_residual(obs: Observed, sim: SimOut) -> np.ndarray:
-    """Residual (V) over a whole reference recording and its tail (R2_mod's padding), weighted 1/sqrt(n)."""
-    u_min = float(obs.v.min())
-    t = np.concatenate([obs.t, obs.t_tail]) if obs.ends_at_cutoff else obs.t
-    meas = np.concatenate([obs.v, np.full(t.size - obs.t.size, u_min)])
-    pred = padded_prediction(t, sim, u_min)
-    pred = np.maximum(pred, u_min) if obs.ends_at_cutoff else pred
-    return (pred - meas) / math.sqrt(t.size)
-
-
-def fit_reference(engine: Engine, params: PackParams, refs: Sequence[Observed], budget: int,
-                  progress: Callable[[str], None] | None = None, workers: int = 1) -> tuple[PackParams, ReferenceFit]:
-    """Fit the params' ``fit.parameters`` to the reference recordings (budgeted least squares).
-
-    The initial state of each reference recording is its own SOC (fitted, as on observed data);
-    the params' initial concentrations are not fitted but keep defining the cyclable lithium
-    (fitting them together with a start state lets the fit trade lithium inventory against the
-    electrode balance and end in degenerate electrode windows). Parameters that shape the mesh
-    (e.g. particle radius) would need a rebuild per evaluation and are kept at their params value
-    (listed in ``skipped``), as is ``r_i_ohm`` (only liionpack's first-step guess).
-    """
-    tic = time.perf_counter()
-    names = [n for n in params.fit.parameters if not n.startswith("Initial concentration")]
-    skipped = [n for n in names if not is_mesh_free(n) or n == "r_i_ohm"
-               or (n in ("Negative electrode thickness [m]", "Positive electrode thickness [m]")
-                   and (params.model != "SPM" or params.options or params.extensions))]
-    names = [n for n in names if n not in skipped]
-    space = fit_space(params, tuple(names)) if names else []
-    n_par = len(space)
-    failure_value = 0.5 * params.series
-
-    def split(u: np.ndarray) -> tuple[dict[str, float], list[float]]:
-        return {p.name: _unit(p, x) for p, x in zip(space, u[:n_par])}, [float(x) for x in u[n_par:]]
-
-    def simulate_all(values: dict[str, float], socs: list[float]) -> list[SimOut]:
-        state_params = params.with_values(values)
-        sims = []
-        for obs, soc in zip(refs, socs):
-            conc = engine.concentrations_for_soc(state_params, soc)
-            sims.append(engine.simulate(params, obs, values=values, concentrations=conc,
-                                        ambient_k=obs.mean_temperature_k))
-        return sims
-
-    def residual(u: np.ndarray) -> np.ndarray:
-        values, socs = split(u)
-        return np.concatenate([reference_residual(o, s) for o, s in zip(refs, simulate_all(values, socs))])
-
-    n_res = sum((o.t.size + (o.t_tail.size if o.ends_at_cutoff else 0)) for o in refs)
-    soc0 = [soc_from_voltage(engine, params, float(o.v[0]) / params.series) for o in refs]
-    u0 = np.array([_from_value(p, p.initial) for p in space] + soc0)
-    try:
-        r0 = residual(u0)
-        initial_rmse = 1e3 * math.sqrt(float(r0 @ r0) / len(refs))
-    except BatteryPredictorError:
-        initial_rmse = float("nan")
-    _log(progress, f"reference fit: {n_par} parameters + initial SOC, budget {budget}, "
-                   f"initial RMSE {initial_rmse:.1f} mV")
-    def failure() -> np.ndarray:
-        return np.full(n_res, failure_value / math.sqrt(n_res))
-
-    # stage 1: the start states alone (the params' values may be far from these recordings' SOC)
-    n_state = max(2, min(budget // 5, 6 * len(refs)))
-    stage = budgeted_least_squares(lambda us: residual(np.concatenate([u0[:n_par], us])), [u0[n_par:]], n_state,
-                                   failure_residual=failure)
-    u1 = np.concatenate([u0[:n_par], stage.u])
-    with ParallelEvaluator(residual, workers) as par:
-        res = budgeted_least_squares(residual, [u1], max(budget - stage.evaluations, 1), failure_residual=failure,
-                                     parallel=par)
-    res.evaluations += stage.evaluations
-    if stage.cost < res.cost:
-        res.u, res.cost = u1, stage.cost
-    values, socs = split(res.u)
-    fitted = params.with_values(values)
-    info = ReferenceFit(values=values, socs=socs, rmse_mV=1e3 * math.sqrt(res.cost / len(refs)),
-                        initial_rmse_mV=initial_rmse, evaluations=res.evaluations, skipped=skipped,
-                        seconds=time.perf_counter() - tic)
-    _log(progress, f"reference fit: RMSE {initial_rmse:.1f} -> {info.rmse_mV:.1f} mV ({res.evaluations} "
-                   f"evaluations, {info.seconds:.0f} s)")
-    return fitted, info
 
 
 # --------------------------------------------------------------------------- candidate fits
@@ -650,8 +558,14 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
     reference = None
     if references:
         refs = [observe(r, params, fit_fraction=0.95, name=str(r.source)) for r in references]
-        params, reference = fit_reference(engine, params, refs, reference_budget, progress, workers)
+        params, reference = identify_reference(params, references, reference_budget, seed, progress)
     obs = [observe(r, params, fit_fraction=fit_fraction, name=str(r.source)) for r in observed]
+    if reference is not None:
+        refusal = reference_verdict(reference, 1e3 * noise_level_v(refs))
+        if refusal is not None:
+            _log(progress, refusal)
+            return not_judged(params, obs, reference, refusal, budget, fit_fraction, causes,
+                              time.perf_counter() - tic)
     if split == "auto":
         split = auto_split(obs)
     soc_guess = [scan_initial_soc(engine, params, o) for o in obs]
@@ -692,7 +606,11 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
     analysis = analyse_residuals(engine, params, obs, base)
     valid = [r for r in results if r.applicable and math.isfinite(r.heldout_rmse_mV)]
     noise_mv = 1e3 * noise_v
-    best = choose_best(valid, noise_mv)
+    shift_k = None
+    if references and all(o.temperature_k is not None for o in obs) and all(r.temperature_k is not None for r in refs):
+        shift_k = float(np.mean([o.mean_temperature_k for o in obs]) - np.mean([r.mean_temperature_k for r in refs]))
+    measured_first = ("temperature",) if shift_k is not None and abs(shift_k) > MEASURED_SHIFT_K else ()
+    best = choose_best(valid, noise_mv, measured_first)
     cause, extended, gain = "none", base, 0.0
     floor_mv = max(noise_mv, reference.rmse_mV if reference is not None else 0.0)
     if best is not None and claim_allowed(base.heldout_rmse_mV, best.heldout_rmse_mV, noise_mv, floor_mv):
@@ -702,11 +620,26 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
         close = [r.cause for r in near_lowest(valid, noise_mv) if r is not best and r.gain_pct >= GAIN_THRESHOLD_PCT]
     from battery_predictor.diagnosis.residuals import evidence_text
 
-    shift_k = None
-    if references and all(o.temperature_k is not None for o in obs) and all(r.temperature_k is not None for r in refs):
-        shift_k = float(np.mean([o.mean_temperature_k for o in obs]) - np.mean([r.mean_temperature_k for r in refs]))
     evidence = evidence_text(cause, base, best, results, analysis, noise_mv, close, floor_mv, shift_k)
     return Diagnosis(cause=cause, evidence=evidence, baseline=base, extended=extended, gain_pct=gain,
                      candidates=results, residuals=analysis, noise_mV=noise_mv, params=params, observed=obs,
                      reference=reference, seconds=time.perf_counter() - tic, budget=budget,
                      fit_fraction=fit_fraction, separable_with=close, split=split, temperature_shift_k=shift_k)
+
+
+def not_judged(params: PackParams, obs: Sequence[Observed], reference: ReferenceFit, reason: str, budget: int,
+               fit_fraction: float, causes: Sequence[str] | None, seconds: float) -> Diagnosis:
+    """The diagnosis that refuses to judge: cause :data:`NOT_JUDGED`, no candidate fitted, ``reason`` as evidence."""
+    def empty(cause: str) -> CandidateResult:
+        return CandidateResult(cause=cause, fitted={}, socs=[], heldout_rmse_mV=float("nan"),
+                               heldout_r2_mod=float("nan"), runtime_error_s=None, fit_rmse_mV=float("nan"),
+                               evaluations=0, failures=0, seconds=0.0, applicable=False,
+                               reason="not judged: the reference fit is too poor")
+
+    base = empty("none")
+    cands = [empty(c.name) for c in CANDIDATES if causes is None or c.name in causes]
+    residuals = ResidualAnalysis(eta2={}, pearson_r={}, rmse_mV=float("nan"), mean_mV=float("nan"), collinear=[])
+    return Diagnosis(cause=NOT_JUDGED, evidence=reason, baseline=base, extended=base, gain_pct=0.0,
+                     candidates=cands, residuals=residuals, noise_mV=1e3 * noise_level_v(list(obs)), params=params,
+                     observed=list(obs), reference=reference, seconds=seconds, budget=budget,
+                     fit_fraction=fit_fraction, judged=False)

@@ -152,9 +152,53 @@ def window_average(rec: Recording, period_s: float) -> Recording:
                      temperature_k=temp, source=rec.source, metadata=dict(rec.metadata))
 
 
+#: A sample counts as discharging when its current exceeds this fraction of the recording's largest
+#: discharge current (rests, soaks and sensor offsets below it add no discharge throughput).
+DISCHARGE_CURRENT_FRACTION = 0.01
+
+
+def discharge_throughput_ah(t_s: np.ndarray, current_a: np.ndarray) -> np.ndarray:
+    """Charge discharged since the start at each sample (Ah, discharge only, zero-order hold).
+
+    Only currents above :data:`DISCHARGE_CURRENT_FRACTION` of the largest discharge current count:
+    rests, temperature soaks and recharges do not move it.
+    """
+    t = np.asarray(t_s, dtype=float)
+    i = np.asarray(current_a, dtype=float)
+    i_max = float(np.max(i)) if i.size else 0.0
+    if i_max <= 0.0:
+        return np.zeros(t.size)
+    i_dis = np.where(i > DISCHARGE_CURRENT_FRACTION * i_max, i, 0.0)
+    return np.concatenate([[0.0], np.cumsum(i_dis[:-1] * np.diff(t))]) / 3600.0
+
+
+def discharge_split_time_s(t_s: np.ndarray, current_a: np.ndarray, fit_fraction: float) -> float:
+    """Time (s, relative) at which ``fit_fraction`` of the recording's discharge throughput is drawn.
+
+    The fit part then holds ``fit_fraction`` of the charge the recording discharges wherever its
+    discharge lies in time: a 2 h soak before a drive cycle, a charging stop in a working day or the
+    rest after the cut-off do not shift the split into a part without discharge, as a split on the
+    clock does. A recording without discharge is split on the clock.
+    """
+    t = np.asarray(t_s, dtype=float)
+    q = discharge_throughput_ah(t, current_a)
+    if q[-1] <= 0.0:
+        return fit_fraction * float(t[-1])
+    k = int(np.searchsorted(q, fit_fraction * q[-1], side="left"))
+    return float(t[min(max(k, 1), t.size - 2)])
+
+
 def observe(rec: Recording, params: PackParams, fit_fraction: float = 0.6, tail_fraction: float = 0.2,
-            name: str = "") -> Observed:
-    """Prepare ``rec`` for the diagnosis: load (with tail), split time, temperatures."""
+            name: str = "", split_on: str = "discharge") -> Observed:
+    """Prepare ``rec`` for the diagnosis: load (with tail), split, temperatures.
+
+    Parameters
+    ----------
+    split_on : {"discharge", "time"}
+        ``"discharge"`` (default): the fit part ends when ``fit_fraction`` of the recording's
+        discharge throughput (Ah) is drawn (:func:`discharge_split_time_s`); ``"time"``: at
+        ``fit_fraction`` of its duration.
+    """
     if len(rec.time_s) < 10:
         raise InputDataError(f"{rec.source}: too few samples ({len(rec.time_s)}) to diagnose")
     if not 0.1 <= fit_fraction <= 0.95:
@@ -169,10 +213,16 @@ def observe(rec: Recording, params: PackParams, fit_fraction: float = 0.6, tail_
     temp = None
     if rec.temperature_k is not None and np.isfinite(rec.temperature_k).all():
         temp = np.asarray(rec.temperature_k, dtype=float)
+    if split_on not in ("discharge", "time"):
+        raise InputDataError(f"split_on must be 'discharge' or 'time', got {split_on!r}")
+    if split_on == "discharge":
+        t_split = discharge_split_time_s(t, rec.current_a, fit_fraction)
+    else:
+        t_split = fit_fraction * float(t[-1])
     mean_t = rec.mean_temperature_k(params.ambient_temperature_k)
     first_t = float(temp[0]) if temp is not None else params.ambient_temperature_k
     return Observed(rec=rec, t=t, v=np.asarray(rec.voltage_v, float), i=np.asarray(rec.current_a, float),
-                    temperature_k=temp, load=load, t_split=fit_fraction * float(t[-1]), ends_at_cutoff=end_cut,
+                    temperature_k=temp, load=load, t_split=t_split, ends_at_cutoff=end_cut,
                     mean_temperature_k=mean_t, first_temperature_k=first_t, name=name or str(rec.source))
 
 

@@ -128,6 +128,8 @@ def write_report(diag, out_dir: str | Path, command: str = "") -> Path:
     """Write ``report.md`` and its figures into ``out_dir``; returns the Markdown path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    if not getattr(diag, "judged", True):
+        return _write_not_judged(diag, out, command)
     plot_voltage(diag, out / "voltage.png")
     plot_residuals(diag, out / "residuals.png")
     plot_candidates(diag, out / "candidates.png")
@@ -171,16 +173,36 @@ def write_report(diag, out_dir: str | Path, command: str = "") -> Path:
                      f"{_fmt(c.gain_pct)} | {_fmt(c.heldout_r2_mod, 4)} | {_fmt(c.runtime_error_s, 0)} | {fitted} |")
     lines += ["", "![held-out RMSE of every candidate](candidates.png)", ""]
     if diag.reference is not None:
-        ref = diag.reference
-        lines += ["## Reference fit", "",
-                  f"RMSE {ref.initial_rmse_mV:.1f} -> {ref.rmse_mV:.1f} mV on the reference data "
-                  f"({ref.evaluations} evaluations, {ref.seconds:.0f} s).", ""]
-        lines += [f"- `{k}` = {v:.6g}" for k, v in ref.values.items()]
-        if ref.skipped:
-            lines += ["", "Kept at the params' value (would need a model rebuild per evaluation): "
-                      + ", ".join(f"`{k}`" for k in ref.skipped) + "."]
-        lines.append("")
+        lines += _reference_lines(diag.reference)
     lines += [f"Voltage noise estimate: {diag.noise_mV:.1f} mV. Diagnosis time: {diag.seconds:.0f} s.", ""]
+    path = out / "report.md"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def _reference_lines(ref) -> list[str]:
+    per = ", ".join(f"{r:.1f}" for r in getattr(ref, "rmse_mV_per_recording", []))
+    lines = ["## Reference fit", "",
+             f"Identification (`fit --method identify`) on the {getattr(ref, 'simulator', 'engine')} simulator: RMSE "
+             f"{ref.initial_rmse_mV:.1f} -> {ref.rmse_mV:.1f} mV on the reference data"
+             + (f" (per recording {per} mV)" if per else "")
+             + f", R2_mod {_fmt(getattr(ref, 'r2_mod', float('nan')), 4)} ({ref.evaluations} evaluations, "
+             f"{ref.seconds:.0f} s).", ""]
+    lines += [f"- `{k}` = {v:.6g}" for k, v in ref.values.items()]
+    if ref.skipped:
+        lines += ["", "Kept at the params' value: " + ", ".join(f"`{k}`" for k in ref.skipped) + "."]
+    lines.append("")
+    return lines
+
+
+def _write_not_judged(diag, out: Path, command: str) -> Path:
+    """``report.md`` of a diagnosis that refused to judge (reference fit too poor): the figure and what to do."""
+    lines = [f"# Diagnosis of `{diag.params.name}`", ""]
+    if command:
+        lines += ["```", command, "```", ""]
+    lines += [f"**Not judged** (cause `{diag.cause}`)", "", diag.evidence, ""]
+    if diag.reference is not None:
+        lines += _reference_lines(diag.reference)
     path = out / "report.md"
     path.write_text("\n".join(lines))
     return path

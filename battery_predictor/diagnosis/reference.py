@@ -1,0 +1,251 @@
+"""The diagnosis's reference fit: the project's identification, and when its result is too poor to judge with.
+
+The baseline of a diagnosis is the params' model fitted on recordings *without* the effect (the
+references). That fit is the project's identification (:mod:`battery_predictor.fitting.identification`,
+``fit --method identify``): seeded TPE then trust-region least squares in identifiable coordinates
+(both electrode capacities, the negative stoichiometry, the series resistance, and each
+recording's initial OCV), simulated on the SPM engine
+(:class:`~battery_predictor.simulation.engine.EngineSimulator`, ~100x faster than stepping
+PyBaMM; models the engine does not cover fall back to the fast simulator with a smaller budget).
+
+A diagnosis is only as good as its reference fit: every candidate is judged against the error the
+reference model leaves on healthy data (its *floor*), and an effect is named only when the
+baseline's held-out error is several times that floor. When the reference fit itself leaves a large
+structural error, every effect drowns in it and naming ``none`` would be a claim the data cannot
+support. :func:`reference_verdict` then refuses to judge (see :data:`POOR_EXCESS_MV_PER_CELL`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.params import PackParams
+from battery_predictor.recording import Recording
+
+#: Default evaluation budget of the reference identification on the SPM engine (the ``fit --method
+#: identify`` default: the Panasonic 25 degC fit at 1000 evaluations takes ~24 s on the engine).
+DEFAULT_IDENTIFY_BUDGET = 1000
+#: Budget when the engine cannot simulate the params (it falls back to the fast simulator, ~1 s per
+#: evaluation of a multi-hour recording).
+FALLBACK_BUDGET = 150
+#: The reference fit is *poor* when the error it leaves above the voltage noise exceeds this much per
+#: cell in series (mV). Physics: between 20 and 80 % SOC the open-circuit voltage of graphite
+#: against NMC/NCA cells rises by ~0.35-0.45 V, i.e. 6-7 mV per % SOC; 40 mV per cell is the
+#: voltage of a ~6-7 % SOC error over the whole recording. A model whose healthy-data error
+#: already corresponds to a state error that large cannot tell a 10 % capacity fade, a doubled
+#: resistance or a 25 K colder cell from its own misfit (the decision needs the baseline's
+#: held-out error several times the floor). For comparison, identifications that work reach 3-8 mV
+#: per cell on synthetic truths with 5 mV noise and 22-24 mV on the measured Panasonic cell with
+#: another chemistry's OCPs (docs/identification.md). Only the excess over the noise counts (white
+#: noise no model can fit, :func:`~battery_predictor.diagnosis.diagnose.excess_mv`).
+POOR_EXCESS_MV_PER_CELL = 40.0
+
+
+@dataclass
+class ReferenceFit:
+    """Outcome of the baseline fit on the reference data.
+
+    Attributes
+    ----------
+    values : dict
+        Fitted identifiable coordinates (shared ones; see ``initial_ocv_v``).
+    socs : list of float
+        Initial open-circuit voltage (V per cell) of each reference recording.
+    rmse_mV : float
+        Root mean square over the recordings of each recording's RMSE (mV, pack).
+    initial_rmse_mV : float
+        The same at the params' own values (start of the search).
+    evaluations : int
+        Model evaluations spent.
+    skipped : list of str
+        Fit parameters of the params not searched (kept at their values).
+    seconds : float
+        Wall time (s).
+    r2_mod : float
+        Mean R2_mod (seed paper Eq. 1-3) of the fit.
+    rmse_mV_per_recording, r2_mod_per_recording : list of float
+        Per reference recording.
+    simulator : str
+        ``engine`` or the fallback's name.
+    series : int
+        Cells in series (for per-cell figures).
+    """
+
+    values: dict[str, float]
+    socs: list[float]
+    rmse_mV: float
+    initial_rmse_mV: float
+    evaluations: int
+    skipped: list[str]
+    seconds: float
+    r2_mod: float = float("nan")
+    rmse_mV_per_recording: list[float] = field(default_factory=list)
+    r2_mod_per_recording: list[float] = field(default_factory=list)
+    simulator: str = "engine"
+    series: int = 1
+
+    @property
+    def rmse_mV_per_cell(self) -> float:
+        return self.rmse_mV / max(self.series, 1)
+
+    def to_json(self) -> dict:
+        return {"rmse_mV": self.rmse_mV, "initial_rmse_mV": self.initial_rmse_mV, "r2_mod": self.r2_mod,
+                "rmse_mV_per_recording": list(self.rmse_mV_per_recording),
+                "r2_mod_per_recording": list(self.r2_mod_per_recording),
+                "evaluations": self.evaluations, "values": dict(self.values), "initial_soc": list(self.socs),
+                "not_fitted": list(self.skipped), "seconds": self.seconds, "simulator": self.simulator,
+                "method": "identify"}
+
+
+def _rms(values: Sequence[float]) -> float:
+    vals = [float(v) for v in values if math.isfinite(float(v))]
+    return math.sqrt(sum(v * v for v in vals) / len(vals)) if vals else float("nan")
+
+
+def identify_reference(params: PackParams, references: Sequence[Recording], budget: int = DEFAULT_IDENTIFY_BUDGET,
+                       seed: int = 0, progress: Callable[[str], None] | None = None
+                       ) -> tuple[PackParams, ReferenceFit]:
+    """Identify ``params`` on the reference recordings (``fit --method identify`` on the SPM engine).
+
+    Parameters
+    ----------
+    params : PackParams
+        The starting model.
+    references : sequence of Recording
+        Recordings without the effect (whole: rests and recharges are simulated).
+    budget : int
+        Model evaluations (each simulates every reference once). On params the engine does not
+        cover, at most :data:`FALLBACK_BUDGET`.
+    seed : int
+        TPE seed.
+
+    Returns
+    -------
+    (PackParams, ReferenceFit)
+        The params with the identified values (initial concentrations = the first reference's
+        start, as ``fit`` writes them) and the fit's figures.
+    """
+    import warnings
+
+    from battery_predictor.fitting.identifiable import default_space
+    from battery_predictor.fitting.identification import IdentificationProblem, identify
+    from battery_predictor.fitting.problem import request_for_recording
+    from battery_predictor.simulation.engine import EngineSimulator
+
+    tic = time.perf_counter()
+    simulator = EngineSimulator()
+    reason = EngineSimulator.unsupported_reason(params, request_for_recording(params, references[0]))
+    name = "engine"
+    if reason is not None:
+        budget = min(budget, FALLBACK_BUDGET)
+        name = "fast"
+        _log(progress, f"reference fit: {reason}; the fast simulator with {budget} evaluations")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        space = default_space(params, references)
+    for w in caught:
+        _log(progress, f"warning: {w.message}")
+    problem = IdentificationProblem(params=params, recordings=list(references), simulator=simulator, space=space)
+    start = {c.name: c.initial for c in space}
+    try:
+        initial_rmse = _rms(problem.score(start).rmse_mv)
+    except BatteryPredictorError:
+        initial_rmse = float("nan")
+    _log(progress, f"reference fit (identification on the {name} simulator): {len(space)} coordinates, budget "
+                   f"{budget} evaluations, initial RMSE {initial_rmse:.1f} mV")
+
+    def show(phase: str, evaluations: int, cost: float) -> None:
+        _log(progress, f"reference fit: {phase}: {evaluations} evaluations, 1 - cost = {1.0 - cost:.4f}")
+
+    result = identify(problem, evaluations=max(int(budget), 2), seed=seed, progress=show)
+    best = problem.score(result.coordinates)
+    fitted = reachable_soc_window(params.with_values(best.values[0]), progress)
+    states = [result.coordinates[c.name] for c in space if c.recording is not None]
+    info = ReferenceFit(values={k: float(v) for k, v in result.coordinates.items() if not k.startswith("initial_ocv")},
+                        socs=[float(s) for s in states], rmse_mV=_rms(best.rmse_mv), initial_rmse_mV=initial_rmse,
+                        evaluations=result.evaluations, skipped=[], seconds=time.perf_counter() - tic,
+                        r2_mod=float(best.r2_mod), rmse_mV_per_recording=[float(x) for x in best.rmse_mv],
+                        r2_mod_per_recording=[float(x) for x in best.per_recording], simulator=name,
+                        series=params.series)
+    _log(progress, f"reference fit: RMSE {initial_rmse:.1f} -> {info.rmse_mV:.1f} mV, R2_mod {info.r2_mod:.4f} "
+                   f"({info.evaluations} evaluations, {info.seconds:.0f} s)")
+    return fitted, info
+
+
+def reachable_soc_window(params: PackParams, progress: Callable[[str], None] | None = None) -> PackParams:
+    """``params`` whose 0 % / 100 % SOC open-circuit voltages the identified cell can reach.
+
+    The diagnosis states each recording's start as an SOC between the params' ``Open-circuit voltage
+    at 0% / 100% SOC [V]``. An identification moves the electrode capacities and the lithium
+    inventory; on a flat OCP (LFP) the identified cell may no longer reach those voltages. They are
+    then moved 1 mV inside the range the identified cell reaches (reported on ``progress``).
+    """
+    from battery_predictor.diagnosis.engine import Engine
+    from battery_predictor.errors import SimulationError
+
+    engine = Engine()
+    try:
+        engine.stoichiometry_window(params)
+        return params
+    except SimulationError:
+        pass
+    pv = engine.parameter_values(params)
+    grid, u_n, u_p = engine._ocp_tables(params, pv)
+    n_n, n_p, li = engine.loadings(pv, {})
+    lo = max(grid[0], (li - n_p * grid[-1]) / n_n)
+    hi = min(grid[-1], (li - n_p * grid[0]) / n_n)
+    if not lo < hi:
+        raise SimulationError("the identified lithium inventory does not fit into the electrodes")
+    x = np.linspace(lo, hi, 4001)
+    ocv = np.interp((li - n_n * x) / n_p, grid, u_p) - np.interp(x, grid, u_n)
+    v_lo, v_hi = float(np.min(ocv)) + 1e-3, float(np.max(ocv)) - 1e-3
+    key0, key100 = "Open-circuit voltage at 0% SOC [V]", "Open-circuit voltage at 100% SOC [V]"
+    ocv0 = min(max(float(pv[key0]), v_lo), v_hi)
+    ocv100 = min(max(float(pv[key100]), v_lo), v_hi)
+    _log(progress, f"reference fit: the identified cell reaches {v_lo:.3f}-{v_hi:.3f} V open-circuit; its 0/100 % "
+                   f"SOC voltages are taken as {ocv0:.3f} / {ocv100:.3f} V (params: {float(pv[key0]):.3f} / "
+                   f"{float(pv[key100]):.3f} V)")
+    return params.with_values({key0: ocv0, key100: ocv100})
+
+
+def excess_per_cell_mv(ref: ReferenceFit, noise_mv: float) -> float:
+    """The reference fit's error above the voltage noise, per cell in series (mV)."""
+    return math.sqrt(max(ref.rmse_mV ** 2 - noise_mv ** 2, 0.0)) / max(ref.series, 1)
+
+
+def reference_verdict(ref: ReferenceFit, noise_mv: float) -> str | None:
+    """None when the reference fit can serve as the baseline, else why not and what to do (one paragraph).
+
+    Poor = its error above the noise exceeds :data:`POOR_EXCESS_MV_PER_CELL` per cell in series, or
+    it did not produce a finite error at all.
+    """
+    excess = excess_per_cell_mv(ref, noise_mv)
+    if math.isfinite(excess) and excess <= POOR_EXCESS_MV_PER_CELL:
+        return None
+    per_rec = ", ".join(f"{r:.0f}" for r in ref.rmse_mV_per_recording)
+    return (f"Not judged: the reference fit is too poor to judge candidates against. It leaves an RMSE of "
+            f"{ref.rmse_mV:.1f} mV (per recording: {per_rec} mV; {ref.rmse_mV_per_cell:.1f} mV per cell in series, "
+            f"{excess:.1f} mV per cell above the {noise_mv:.1f} mV voltage noise) and R2_mod {ref.r2_mod:.4f} on the "
+            f"healthy reference data, above the {POOR_EXCESS_MV_PER_CELL:.0f} mV per cell that a usable reference "
+            f"leaves (about a 6-7 % SOC error on an NMC/NCA open-circuit voltage): any effect of realistic size would "
+            f"drown in the model's own error, so no cause - not even 'none' - is named. What to do: raise "
+            f"--reference-budget (now {ref.evaluations} evaluations), check that the reference recordings belong to "
+            f"this pack and --params describe its chemistry (OCPs, series/parallel count), give references that "
+            f"cover the observed operating range (complete discharges, same load kind), or fit the params first "
+            f"with 'battery-predictor fit --method identify' and run diagnose on the fitted params without "
+            f"--reference.")
+
+
+def _log(progress: Callable[[str], None] | None, msg: str) -> None:
+    if progress is not None:
+        progress(msg)
+
+
+__all__ = ["DEFAULT_IDENTIFY_BUDGET", "POOR_EXCESS_MV_PER_CELL", "ReferenceFit", "excess_per_cell_mv",
+           "identify_reference", "reference_verdict"]
