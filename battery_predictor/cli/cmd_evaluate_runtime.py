@@ -35,8 +35,8 @@ def register(sub) -> None:
     p.add_argument("--peak-source", choices=("window", "sample"), default=None,
                    help="which load peaks stop the pack: 5 s window means or single samples "
                         "(default: the predictor's default, see the node parameter peak_source)")
-    p.add_argument("--load-model", choices=("power", "current"), default=None,
-                   help="what of the average load stays constant ahead (default: the predictor's, power; see the "
+    p.add_argument("--load-model", choices=("auto", "power", "current"), default=None,
+                   help="what of the average load stays constant ahead (default: the predictor's, auto; see the "
                         "node parameter load_model)")
     p.add_argument("--out", default=None, metavar="DIR", help="write summary.json, checkpoints.json and plots here")
     p.add_argument("--json", action="store_true", help="print one JSON object")

@@ -223,8 +223,9 @@ class PredictorNode(Node):
                                        "the paper's) or 'ewma' (exponentially weighted, load_time_constant_s).",
                                        ESTIMATORS),
             load_model=declare_str(self, "load_model", PredictorConfig.load_model,
-                                   "What of the average load stays constant ahead: 'power' (the current rises as "
-                                   "the pack voltage falls, as behind DC-DC converters and drives) or 'current' "
+                                   "What of the average load stays constant ahead: 'auto' (the cycle's windows "
+                                   "decide; a constant power until they can), 'power' (the current rises as the "
+                                   "pack voltage falls, as behind DC-DC converters and drives) or 'current' "
                                    "(the paper's).", LOAD_MODELS),
             load_time_constant_s=declare_float(self, "load_time_constant_s", _core_default("load_time_constant_s"),
                                                "Time constant of the 'ewma' load estimator, s.", 1.0, 86400.0),

@@ -108,6 +108,8 @@ class LoadEstimator:
         self._ewma_power_weight = 0.0
         self.currents: deque[float] = deque(maxlen=20000)
         self.peaks: deque[float] = deque(maxlen=20000)
+        self.stamps: deque[float] = deque(maxlen=20000)
+        self.voltages: deque[float] = deque(maxlen=20000)
 
     def add(self, stamp_s: float, current_a: float, peak_current_a: float = math.nan,
             voltage_v: float = math.nan) -> bool:
@@ -145,6 +147,8 @@ class LoadEstimator:
                 self._ewma_power_weight = self._ewma_power_weight * decay + (1.0 - decay)
         self.currents.append(current_a)
         self.peaks.append(peak_current_a if math.isfinite(peak_current_a) else current_a)
+        self.stamps.append(stamp_s)
+        self.voltages.append(voltage_v)
         return began
 
     def _track_charging(self, dt: float, previous_a: float, current_a: float) -> bool:
@@ -178,6 +182,10 @@ class LoadEstimator:
         charging = self._in_session and self._last_current_a < -self.charge_current_a
         return LoadEstimate(mean, self._duration_s, charging, self._last_current_a if charging else math.nan, power)
 
+    def kind(self, resistance_ohm: float, prior: float) -> LoadKind:
+        """:func:`load_kind` of the present cycle's windows."""
+        return load_kind(self.stamps, self.currents, self.voltages, resistance_ohm, prior)
+
     def quantile_a(self, q: float, *, of_peaks: bool = False) -> float:
         """Quantile ``q`` of the cycle's window currents (or of each window's largest sample), A.
 
@@ -187,3 +195,91 @@ class LoadEstimator:
         if not values or q <= 0:
             return math.nan
         return float(np.quantile(np.fromiter(values, float), min(q, 1.0)))
+
+
+@dataclass(frozen=True)
+class LoadKind:
+    """Whether the cycle's load behaves as a current or as a power.
+
+    Attributes
+    ----------
+    exponent : float
+        ``k`` of a demand ``I V^k`` that stays constant: 0 = a constant current, 1 = a constant
+        power (``V`` the open-circuit estimate ``V + I R``).
+    z_current, z_power : float
+        Trend statistics (Spearman's rank correlation with time times sqrt(n)) of the window
+        currents and of the window powers over the cycle's discharge windows; NaN when too few.
+    windows : int
+        Blocks of discharge windows the statistics used.
+    decided : bool
+        False when the data did not tell the two apart and ``exponent`` is the prior.
+    """
+
+    exponent: float
+    z_current: float
+    z_power: float
+    windows: int
+    decided: bool
+
+
+#: Windows are pooled into blocks of this length (s) before the trends are ranked: usage holds a
+#: level for minutes, so neighbouring windows are not independent samples.
+KIND_BLOCK_S = 300.0
+#: Blocks below which the load kind is not judged (the prior applies).
+MIN_KIND_BLOCKS = 8
+#: Least difference of the two trend statistics for the data to decide.
+MIN_KIND_SEPARATION = 3.0
+
+
+def _block_means(t: np.ndarray, values: list[np.ndarray]) -> list[np.ndarray]:
+    """Means of each array over consecutive :data:`KIND_BLOCK_S` blocks of ``t`` (empty blocks dropped)."""
+    index = np.floor((t - t[0]) / KIND_BLOCK_S).astype(int)
+    counts = np.bincount(index)
+    keep = counts > 0
+    return [np.bincount(index, weights=v)[keep] / counts[keep] for v in values]
+
+
+def load_kind(stamps_s, currents_a, voltages_v, resistance_ohm: float, prior: float) -> LoadKind:
+    """The exponent of the load's constant demand ``I V^k`` from the windows of a discharge cycle.
+
+    Under a constant current the currents show no trend over the cycle while the powers fall
+    with the voltage; under a constant power it is the other way round. The discharge windows
+    are pooled into :data:`KIND_BLOCK_S` blocks and the trends measured as Spearman rank
+    correlations of the block means with time (robust to the spread of the usage), scaled by
+    sqrt(blocks - 1): ``z_current`` and ``z_power``. The exponent is where the trend of ``I V^k``
+    would vanish, interpolated linearly between them and clipped to 0..1; ``prior`` with fewer
+    than :data:`MIN_KIND_BLOCKS` blocks or when the statistics differ by less than
+    :data:`MIN_KIND_SEPARATION` (the voltage has not moved enough to tell).
+
+    Parameters
+    ----------
+    stamps_s, currents_a, voltages_v : sequence of float
+        Window stamps (s), mean currents (A, positive = discharge) and mean voltages (V).
+    resistance_ohm : float
+        Pack resistance (Ohm) that moves a window's voltage to its open-circuit estimate.
+    prior : float
+        Exponent used when the data do not decide.
+    """
+    from scipy.stats import spearmanr
+
+    t = np.asarray(stamps_s, dtype=float)
+    i = np.asarray(currents_a, dtype=float)
+    v = np.asarray(voltages_v, dtype=float)
+    ok = np.isfinite(v) & np.isfinite(i) & np.isfinite(t)
+    if ok.any():
+        ok &= i > 0.05 * float(np.max(i[ok]))
+    if ok.sum() < 2:
+        return LoadKind(prior, math.nan, math.nan, 0, False)
+    r_ohm = resistance_ohm if math.isfinite(resistance_ohm) else 0.0
+    power = i * (v + i * r_ohm)
+    tb, ib, pb = _block_means(t[ok], [t[ok], i[ok], power[ok]])
+    n = int(tb.size)
+    if n < MIN_KIND_BLOCKS:
+        return LoadKind(prior, math.nan, math.nan, n, False)
+    root = math.sqrt(n - 1)
+    z_current = float(spearmanr(tb, ib).statistic) * root
+    z_power = float(spearmanr(tb, pb).statistic) * root
+    if not (math.isfinite(z_current) and math.isfinite(z_power)) or abs(z_current - z_power) < MIN_KIND_SEPARATION:
+        return LoadKind(prior, z_current, z_power, n, False)
+    exponent = min(max(z_current / (z_current - z_power), 0.0), 1.0)
+    return LoadKind(exponent, z_current, z_power, n, True)

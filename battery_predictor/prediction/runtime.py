@@ -3,9 +3,9 @@
 From the calibrated SOC, the pack is simulated under the average load of the present discharge
 cycle at the last measured temperature; the remaining runtime is the time until the pack voltage
 reaches the robot's cut-off (13.30 V for the information robot) or a cell reaches its lower
-cut-off, whichever comes first. The average load is a constant current (the paper's) or a
-constant power (:func:`constant_power_run`: the current rises as the voltage falls, as it does
-behind the robots' DC-DC converters and drives).
+cut-off, whichever comes first. The average load is a constant current (the paper's), a
+constant power (the current rises as the voltage falls, as it does behind the robots' DC-DC
+converters and drives), or in between (:func:`demand_run`).
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ def peak_voltage_drop_v(runner: PackRunner, start, average_current_a: float, pea
 
 #: Step (s) of the piecewise-constant current that follows a constant power.
 POWER_STEP_S = 60.0
-#: Fixed-point passes of :func:`constant_power_run` at most, and the current change (relative) that ends them.
+#: Fixed-point passes of :func:`demand_run` at most, and the current change (relative) that ends them.
 POWER_PASSES = 10
 POWER_TOLERANCE = 0.002
 #: ... and the change of the time to the cut-off (s) that ends them.
@@ -124,25 +124,31 @@ class LoadPath:
         return float(self.current_a[max(k, 0)])
 
 
-def constant_power_run(runner: PackRunner, start, power_w: float, horizon_s: float, temperature_k: float,
-                       first_voltage_v: float, cutoff_voltage_v: float):
-    """The pack under a constant discharge power: ``(run, LoadPath)``.
+def demand_run(runner: PackRunner, start, current_a: float, power_w: float, exponent: float, horizon_s: float,
+               temperature_k: float, first_voltage_v: float, cutoff_voltage_v: float):
+    """The pack under a constant demand ``I V^k``: ``(run, LoadPath)``.
 
-    The current of each :data:`POWER_STEP_S` step is ``power_w`` over the pack voltage the
-    previous pass simulated in that step (the first pass divides by ``first_voltage_v``), until
-    the currents before the pack reaches ``cutoff_voltage_v`` (but for the last two steps, which
-    follow the crossing time) change by less than :data:`POWER_TOLERANCE` (relative) and the
-    crossing time by less than :data:`POWER_END_TOLERANCE_S`. After the crossing the currents do
-    not matter to the runtime (beyond a cell's cut-off the voltage and so the current run away).
+    The current of each :data:`POWER_STEP_S` step is ``current_a^(1-k) (power_w / V)^k`` with
+    the pack voltage ``V`` the previous pass simulated in that step (the first pass takes
+    ``first_voltage_v``): a constant current for ``k = 0``, a constant power for ``k = 1``. Passes
+    repeat until the currents before the pack reaches ``cutoff_voltage_v`` (but for the last two
+    steps, which follow the crossing time) change by less than :data:`POWER_TOLERANCE` (relative)
+    and the crossing time by less than :data:`POWER_END_TOLERANCE_S`. After the crossing the
+    currents do not matter to the runtime (beyond a cell's cut-off the voltage and so the current
+    run away).
 
     Raises
     ------
     SimulationError
         The passes do not settle (the pack cannot deliver the power).
     """
+    if exponent <= 0.0:
+        path = LoadPath.constant(current_a, horizon_s)
+        return runner.run(start, path.segments(horizon_s), temperature_k), path
+    scale = current_a ** (1.0 - exponent) * power_w ** exponent
     n = max(1, int(math.ceil(horizon_s / POWER_STEP_S)))
     mid = (np.arange(n) + 0.5) * POWER_STEP_S
-    path = LoadPath(POWER_STEP_S, np.full(n, power_w / first_voltage_v))
+    path = LoadPath(POWER_STEP_S, np.full(n, scale / first_voltage_v ** exponent))
     last_end_s = math.inf
     for _ in range(POWER_PASSES):
         run = runner.run(start, path.segments(horizon_s), temperature_k)
@@ -150,14 +156,15 @@ def constant_power_run(runner: PackRunner, start, power_w: float, horizon_s: flo
         t_end = float(run.end_time_s) if t_end is None else t_end
         v = np.interp(mid, run.time_s, run.pack_voltage_v)  # held at the last value after the run ends
         v = np.maximum(v, 0.5 * cutoff_voltage_v)
-        new = LoadPath(POWER_STEP_S, power_w / v)
+        new = LoadPath(POWER_STEP_S, scale / v ** exponent)
         before = mid < t_end - 2 * POWER_STEP_S  # the steps at the knee follow the crossing time
         change = np.abs(new.current_a[before] - path.current_a[before]) / new.current_a[before]
         settled = change.size == 0 or float(change.max()) < POWER_TOLERANCE
         if settled and abs(t_end - last_end_s) <= POWER_END_TOLERANCE_S:
             return run, path
         path, last_end_s = new, t_end
-    raise SimulationError(f"the constant-power load ({power_w:.1f} W) did not settle in {POWER_PASSES} passes")
+    raise SimulationError(f"the load ({current_a:.2f} A, {power_w:.1f} W, exponent {exponent:.2f}) did not settle "
+                          f"in {POWER_PASSES} passes")
 
 
 def peak_crossing_s(runner: PackRunner, start, average: LoadPath, peak_factor: float,
@@ -220,7 +227,7 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
                               average_current_a: float, cutoff_voltage_v: float,
                               calibration: Calibration | None = None,
                               peak_current_a: float | None = None, peak_duration_s: float = 5.0,
-                              average_power_w: float | None = None) -> RuntimePrediction:
+                              average_power_w: float | None = None, load_exponent: float = 1.0) -> RuntimePrediction:
     """Calibrate the SOC (unless given), then simulate the average load to the cut-off.
 
     Parameters
@@ -245,8 +252,11 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
         How long a peak lasts in the model, s: the monitor's window for a peak of window means, a
         sample's length for the largest sample of a window.
     average_power_w : float, optional
-        Average discharge power of the present cycle in W (> 0): the load ahead is this constant
-        power (:func:`constant_power_run`) instead of ``average_current_a``.
+        Average discharge power of the present cycle in W (> 0): the load ahead is the demand
+        ``I V^k`` of :func:`demand_run` with ``k = load_exponent``; without it, a constant
+        ``average_current_a``.
+    load_exponent : float
+        ``k`` (0 = constant current .. 1 = constant power) when ``average_power_w`` is given.
     """
     if not (math.isfinite(average_current_a) and average_current_a > 0):
         raise SimulationError(f"average discharge current must be > 0 A, got {average_current_a}")
@@ -257,12 +267,9 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
         return RuntimePrediction(0.0, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
     charge_left_ah = max(cal.soc - runner.soc_bounds[0], 0.02) * runner.capacity_ah
     horizon_s = min(MAX_HORIZON_S, 1.5 * charge_left_ah * 3600.0 / average_current_a + 3600.0)
-    if average_power_w is None:
-        path = LoadPath.constant(average_current_a, horizon_s)
-        run = runner.run(cal.start, path.segments(horizon_s), temperature_k)
-    else:
-        run, path = constant_power_run(runner, cal.start, average_power_w, horizon_s, temperature_k, voltage_v,
-                                       cutoff_voltage_v)
+    exponent = min(max(float(load_exponent), 0.0), 1.0) if average_power_w is not None else 0.0
+    run, path = demand_run(runner, cal.start, average_current_a, average_power_w or 0.0, exponent, horizon_s,
+                           temperature_k, voltage_v, cutoff_voltage_v)
     assumed_a = path.current_at(0.0)
     if peak_current_a is not None and peak_current_a > average_current_a:
         t_peak = peak_crossing_s(runner, cal.start, path, float(peak_current_a) / average_current_a, temperature_k,

@@ -129,3 +129,48 @@ def test_repeated_drive_cycles_draw_a_constant_power_not_a_constant_current():
     power = [float(np.mean((i * v)[m])) for m in (first, last)]
     assert current[1] / current[0] > 1.1  # the current rises as the voltage falls ...
     assert power[1] / power[0] == pytest.approx(1.0, abs=0.01)  # ... at a constant power
+
+
+def _windows(kind: str, seed: int, hours: float = 6.0):
+    """5 s windows of a random usage (1.5..2.5 A demand levels held 60 s) on a pack whose open-circuit
+    voltage falls from 16.4 to 13.3 V; the demand is drawn as a current or as a power."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, hours * 3600.0, 5.0)
+    level = np.repeat(rng.uniform(1.5, 2.5, t.size // 12 + 1), 12)[: t.size]
+    ocv = 16.4 - 3.1 * t / t[-1]
+    r_ohm = 0.1
+    if kind == "current":
+        i = level
+    else:
+        power = level * 15.0
+        i = (ocv - np.sqrt(ocv ** 2 - 4 * r_ohm * power)) / (2 * r_ohm)  # P = I (OCV - I R)
+    v = ocv - i * r_ohm
+    return t, i, v, r_ohm
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_load_kind_tells_a_current_load_from_a_power_load(seed):
+    from battery_predictor.prediction.load_estimate import load_kind
+
+    for kind, expected in (("current", 0.0), ("power", 1.0)):
+        t, i, v, r_ohm = _windows(kind, seed)
+        found = load_kind(t, i, v, r_ohm, prior=0.5)
+        assert found.decided and abs(found.exponent - expected) <= 0.3, (kind, found)
+    t, i, v, r_ohm = _windows("current", seed, hours=0.5)
+    early = load_kind(t, i, v, r_ohm, prior=0.7)
+    assert not early.decided and early.exponent == 0.7  # too few windows: the prior
+
+
+@pytest.mark.skipif(not PANASONIC.is_dir(), reason="measured data not available (../shared/data)")
+def test_load_kind_finds_a_power_load_in_measured_drive_cycles():
+    from battery_predictor.prediction.load_estimate import load_kind
+
+    for name in ("drive_T25C_HWFET.csv", "drive_T25C_LA92.csv"):
+        rec = load_recording(PANASONIC / name)
+        windows = monitor_windows(rec.time_s, rec.voltage_v, rec.current_a)
+        t = np.array([w.stamp_s for w in windows])
+        i = np.array([w.current_a for w in windows])
+        v = np.array([w.voltage_v for w in windows])
+        found = load_kind(t, i, v, 0.05, prior=1.0)
+        assert found.z_current > 1.5 and abs(found.z_power) < 1.0, (name, found)  # the current trends, the power not
+        assert found.exponent >= 0.7, (name, found)  # never taken for a current load

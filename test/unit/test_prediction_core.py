@@ -214,21 +214,21 @@ def test_peak_no_higher_than_the_average_keeps_the_papers_runtime(temi_runner):
 
 
 def test_constant_power_ahead_raises_the_current_and_shortens_the_runtime(temi_runner):
-    from battery_predictor.prediction.runtime import constant_power_run
+    from battery_predictor.prediction.runtime import demand_run
 
     cal = calibrate_soc(temi_runner, 15.0, 2.0, 298.15)
     current = predict_remaining_runtime(temi_runner, 15.0, 2.0, 298.15, 2.0, 13.30, calibration=cal)
     power = predict_remaining_runtime(temi_runner, 15.0, 2.0, 298.15, 2.0, 13.30, calibration=cal,
                                       average_power_w=30.0)
     assert power.remaining_s < current.remaining_s
-    run, path = constant_power_run(temi_runner, cal.start, 30.0, current.remaining_s, 298.15, 15.0, 13.30)
+    run, path = demand_run(temi_runner, cal.start, 2.0, 30.0, 1.0, current.remaining_s, 298.15, 15.0, 13.30)
     ahead = path.current_a[: int(power.remaining_s // path.step_s)]
     assert ahead[0] == pytest.approx(30.0 / 15.0, rel=0.05) and np.all(np.diff(ahead) > -1e-3)
     v = np.interp((np.arange(ahead.size) + 0.5) * path.step_s, run.time_s, run.pack_voltage_v)
     assert np.allclose(ahead * v, 30.0, rtol=0.01)  # the pack delivers the power at every step
 
 
-def test_core_default_load_model_is_power_and_current_is_the_papers(temi_runner):
-    assert PredictorConfig(params_file="x").load_model == "power"
+def test_core_default_load_model_is_auto_and_current_is_the_papers(temi_runner):
+    assert PredictorConfig(params_file="x").load_model == "auto"
     with pytest.raises(ValueError, match="load_model"):
         PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml"), load_model="torque"))
