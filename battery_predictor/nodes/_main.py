@@ -12,6 +12,7 @@ from rclpy.node import Node
 
 from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.nodes.executor import StartedMultiThreadedExecutor
+from battery_predictor.nodes.memory import configure_process
 
 #: Errors in the configuration (parameters, names): one line on stderr and exit code 2, no traceback.
 CONFIG_ERRORS = (ValueError, BatteryPredictorError, ParameterException, NameValidationException)
@@ -29,6 +30,7 @@ def spin_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None =
     threads : int
         Executor threads (the predictor needs >= 2 so the service answers during a runtime update).
     """
+    configure_process()  # memory back after large requests (nodes/memory.py); before rclpy.init
     rclpy.init(args=sys.argv if args is None else args)
     nodes: list[Node] = []
     executor = StartedMultiThreadedExecutor(num_threads=threads)
