@@ -14,6 +14,7 @@ from battery_predictor.errors import BatteryPredictorError, cli_flags
 COMMAND_MODULES = (
     "battery_predictor.cli.cmd_screen",
     "battery_predictor.cli.cmd_fit",
+    "battery_predictor.cli.cmd_fleet",
     "battery_predictor.cli.cmd_ocv",
     "battery_predictor.cli.cmd_simulate",
     "battery_predictor.cli.cmd_profile",
