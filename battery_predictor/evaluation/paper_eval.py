@@ -136,11 +136,15 @@ def actual_runtime_s(rec: Recording, cutoff_v: float) -> float:
 
 
 def runtime_evaluation(params: PackParams, recs: Sequence[Recording], *, checkpoints_s=CHECKPOINTS_S,
-                       cutoff_v: float | None = None, peak_current_quantile: float = 0.0) -> list[RuntimePoint]:
+                       cutoff_v: float | None = None, peak_current_quantile: float = 0.0,
+                       load_model: str = "current") -> list[RuntimePoint]:
     """The predictor's strategy after 30, 60, ... min of each recording vs the actual remaining runtime.
 
     ``peak_current_quantile`` = 0 is the paper's strategy (average load); > 0 the predictor's
     load-peak strategy (see :class:`~battery_predictor.prediction.core.PredictorConfig`).
+    ``load_model`` is the paper's constant current by default (the emulated recordings draw their
+    profile's currents as they are); the predictor's default ``"auto"`` is measured in
+    ``docs/runtime_real_data``.
     """
     from battery_predictor.prediction.core import PredictorConfig, PredictorCore
 
@@ -149,7 +153,8 @@ def runtime_evaluation(params: PackParams, recs: Sequence[Recording], *, checkpo
     for rec in recs:
         t_true = actual_runtime_s(rec, cutoff)
         core = PredictorCore(PredictorConfig(params_file=params.source, cutoff_voltage_v=cutoff,
-                                             stale_after_s=1e9, peak_current_quantile=peak_current_quantile),
+                                             stale_after_s=1e9, peak_current_quantile=peak_current_quantile,
+                                             load_model=load_model),
                              params=params)
         t = rec.relative_time_s
         temp = rec.temperature_k if rec.temperature_k is not None else np.full(t.size, math.nan)
