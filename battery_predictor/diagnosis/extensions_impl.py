@@ -12,7 +12,10 @@ extension                  what it changes
 =========================  =======================================================================
 ``temperature``            Arrhenius temperature dependence of both particle diffusivities (``...
                            diffusivity activation energy [J.mol-1]``), which Chen2020 and Prada2013
-                           lack (their exchange-current densities carry one already), and of the pack's
+                           lack, with an extra positive-electrode activation energy towards full
+                           lithiation (:data:`EA_POS_FULL`: a temperature-dependent accessible
+                           capacity), an extra activation energy of both exchange-current densities
+                           (:data:`EA_KINETICS`, on top of the base set's own), and of the pack's
                            series resistance ``R_eq`` the reference fit found (``Series resistance
                            activation energy [J.mol-1]``; :func:`series_resistance_factor`, applied by
                            the fast simulator and the predictor's runner). The cell is isothermal at
@@ -58,6 +61,16 @@ R_GAS = 8.314462618
 EA_NEG = "Negative particle diffusivity activation energy [J.mol-1]"
 EA_POS = "Positive particle diffusivity activation energy [J.mol-1]"
 EA_SERIES = "Series resistance activation energy [J.mol-1]"
+#: Activation energy (J/mol) added to the exchange-current densities of both electrodes (on top of the
+#: Arrhenius factor a base set's own functions may carry): ``j0(T) = j0_set(T) exp(-E/R (1/T - 1/T_ref))``.
+EA_KINETICS = "Exchange-current density extra activation energy [J.mol-1]"
+#: Activation energy (J/mol) the positive particle diffusivity gains towards full lithiation, weighted
+#: by :func:`lithiation_weight` (0 up to half lithiation, 1 at full): as the layered oxide runs out of
+#: vacancies the hopping barrier rises, so in the cold the surface saturates early and the accessible
+#: capacity falls, while at the reference temperature nothing changes.
+EA_POS_FULL = "Positive particle diffusivity extra activation energy at full lithiation [J.mol-1]"
+#: Stoichiometry above which :data:`EA_POS_FULL` starts to act.
+LITHIATION_ONSET = 0.5
 HEAT_TRANSFER = "Total heat transfer coefficient [W.m-2.K-1]"
 CONTACT_RESISTANCE = "Contact resistance [Ohm]"
 CURRENT_OFFSET = "Current sensor offset [A]"
@@ -86,7 +99,7 @@ _OPTIONS = {
 #: Default values of each extension's own keys (the extension is then present but neutral, except
 #: the hysteresis, whose neutral value would be no hysteresis).
 EXTENSION_DEFAULTS: dict[str, dict[str, float]] = {
-    "temperature": {EA_NEG: 0.0, EA_POS: 0.0, EA_SERIES: 0.0},
+    "temperature": {EA_NEG: 0.0, EA_POS: 0.0, EA_SERIES: 0.0, EA_KINETICS: 0.0, EA_POS_FULL: 0.0},
     "resistance_growth": {CONTACT_RESISTANCE: 0.0},
     "current_offset": {CURRENT_OFFSET: 0.0},
     "cell_imbalance": {WEAK_FRACTION: 1.0},
@@ -215,14 +228,39 @@ def _cooling_area_m2(volume_m3: float) -> float:
     return math.pi * d * (_CYLINDER_ASPECT * d) + 2.0 * math.pi * (d / 2.0) ** 2
 
 
-def _arrhenius_diffusivity(d_ref: float, ea_key: str, t_ref: float):
+def lithiation_weight(sto):
+    """0 below :data:`LITHIATION_ONSET`, rising quadratically to 1 at full lithiation (numbers or PyBaMM symbols)."""
+    import pybamm
+
+    x = (sto - LITHIATION_ONSET) / (1.0 - LITHIATION_ONSET)
+    if isinstance(x, pybamm.Symbol):
+        return pybamm.maximum(x, 0.0) ** 2
+    import numpy as np
+
+    return np.maximum(x, 0.0) ** 2
+
+
+def _arrhenius_diffusivity(d_ref: float, ea_key: str, t_ref: float, full_key: str | None = None):
     import pybamm
 
     def diffusivity(sto, T):
         ea = pybamm.Parameter(ea_key)
+        if full_key is not None:
+            ea = ea + pybamm.Parameter(full_key) * lithiation_weight(sto)
         return d_ref * pybamm.exp(ea / R_GAS * (1.0 / t_ref - 1.0 / T))
 
     return diffusivity
+
+
+def _arrhenius_exchange_current(j0, t_ref: float):
+    """``j0`` (a base-set function of c_e, c_s_surf, c_s_max, T) times the extra Arrhenius factor of :data:`EA_KINETICS`."""
+    import pybamm
+
+    def exchange_current(c_e, c_s_surf, c_s_max, T):
+        ea = pybamm.Parameter(EA_KINETICS)
+        return j0(c_e, c_s_surf, c_s_max, T) * pybamm.exp(ea / R_GAS * (1.0 / t_ref - 1.0 / T))
+
+    return exchange_current
 
 
 def _shifted_ocp(ocp, sign: float):
@@ -258,7 +296,11 @@ def apply_extension_parameter_values(params, pv):
             key = f"{domain} particle diffusivity [m2.s-1]"
             d_ref = pv[key]
             if isinstance(d_ref, (int, float)):  # a base-set function already carries its own T dependence
-                pv[key] = _arrhenius_diffusivity(float(d_ref), ea_key, t_ref)
+                pv[key] = _arrhenius_diffusivity(float(d_ref), ea_key, t_ref,
+                                                 EA_POS_FULL if domain == "Positive" else None)
+            j0_key = f"{domain} electrode exchange-current density [A.m-2]"
+            if j0_key in keys and callable(pv[j0_key]):
+                pv[j0_key] = _arrhenius_exchange_current(pv[j0_key], t_ref)
     if "electrolyte_transport" in exts:
         b = pv[BRUGGEMAN]
         for key in BRUGGEMAN_KEYS:

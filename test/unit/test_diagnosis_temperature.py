@@ -1,0 +1,76 @@
+"""The ``temperature`` extension's physics: Arrhenius kinetics, a capacity that falls in the cold, nothing at T_ref."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from battery_predictor.diagnosis import extensions_impl as ext
+from battery_predictor.diagnosis.diagnose import rest_soc_box
+from battery_predictor.diagnosis.engine import Engine, observe
+from battery_predictor.params import load_params
+from battery_predictor.recording import Recording
+
+PARAMS = Path(__file__).resolve().parents[2] / "params"
+
+
+def _lgm50(**extra):
+    params = load_params(PARAMS / "lgm50.yaml")
+    return replace(params, extensions=("temperature",), extra={**dict(params.extra), **extra})
+
+
+def test_lithiation_weight_acts_only_towards_full_lithiation():
+    w = ext.lithiation_weight(np.array([0.0, 0.5, 0.75, 1.0]))
+    assert w.tolist() == pytest.approx([0.0, 0.0, 0.25, 1.0])
+
+
+def test_exchange_current_gets_the_extra_arrhenius_factor_and_none_at_the_reference_temperature():
+    import pybamm
+
+    from battery_predictor.simulation.cell_setup import prepared_parameter_values
+
+    ea = 30000.0
+    plain = load_params(PARAMS / "lgm50.yaml").parameter_values()
+    pv = prepared_parameter_values(_lgm50(**{ext.EA_KINETICS: ea}))
+    key = "Negative electrode exchange-current density [A.m-2]"
+    args = (pybamm.Scalar(1000.0), pybamm.Scalar(15000.0), pybamm.Scalar(33133.0))
+
+    def value(values, temperature_k):
+        sym = values[key](*args, pybamm.Scalar(temperature_k))
+        return float(values.process_symbol(sym).evaluate())
+
+    assert value(pv, 298.15) == pytest.approx(value(plain, 298.15), rel=1e-9)
+    ratio = value(pv, 273.15) / value(plain, 273.15)
+    assert ratio == pytest.approx(math.exp(-ea / ext.R_GAS * (1 / 273.15 - 1 / 298.15)), rel=1e-9)
+
+
+@pytest.mark.slow
+def test_full_lithiation_activation_shortens_a_cold_discharge_only():
+    """Accessible capacity with a physical basis: the cold 1C discharge ends earlier, the 25 degC one does not move."""
+    from battery_predictor.simulation import SimulationRequest, StepLoad
+    from battery_predictor.simulation.fast import FastPackSimulator
+
+    load = StepLoad.constant(5.0, 4000.0)
+    ends = {}
+    for ea_full in (0.0, 100000.0):
+        params = _lgm50(**{ext.EA_NEG: 20000.0, ext.EA_POS: 20000.0, ext.EA_POS_FULL: ea_full})
+        for t_k in (298.15, 273.15):
+            res = FastPackSimulator().simulate(params, SimulationRequest(load=load, ambient_temperature_k=t_k))
+            ends[(ea_full, t_k)] = res.end_time_s
+    assert ends[(100000.0, 298.15)] == pytest.approx(ends[(0.0, 298.15)], rel=2e-3)
+    assert ends[(100000.0, 273.15)] < 0.97 * ends[(0.0, 273.15)]
+
+
+def test_rest_soc_box_narrows_the_start_of_a_recording_that_starts_at_rest():
+    params = load_params(PARAMS / "lgm50.yaml")
+    t = np.arange(0.0, 600.0, 10.0)
+    v = np.linspace(3.9, 3.7, t.size)
+    at_rest = observe(Recording(t, v, np.where(t > 0, 5.0, 0.0), None), params)
+    loaded = observe(Recording(t, v, np.full(t.size, 5.0), None), params)
+    lo, hi = rest_soc_box(Engine(), params, at_rest, tol_v=0.02)
+    assert 0.0 < lo < hi < 1.0 and hi - lo < 0.3
+    assert rest_soc_box(Engine(), params, loaded, tol_v=0.02) == (0.0, 1.0)
