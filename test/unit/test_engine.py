@@ -446,3 +446,13 @@ def test_the_package_exposes_the_simulator_and_the_segment_runner():
     assert engine_package.EnginePack is EnginePack
     with pytest.raises(AttributeError):
         engine_package.NoSuchName  # noqa: B018
+
+
+@pytest.mark.parametrize("backend", ["auto", "numpy"])
+def test_charging_a_full_cell_past_its_range_is_an_error_not_a_voltage(temi_spm, backend):
+    model, modal = temi_spm
+    c_n0 = 0.995 * model.blocks[0].scale_mol_m3  # a full negative electrode ...
+    c_p0 = 0.05 * model.blocks[1].scale_mol_m3
+    with pytest.raises(SimulationError, match="charged past full"):  # ... charged for an hour at 5 A per cell
+        run_cells(model, modal, np.full(720, 5.0), np.full(720, -5.0), c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
+                  temperature_k=298.15, backend=backend)

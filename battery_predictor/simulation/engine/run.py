@@ -38,6 +38,9 @@ from battery_predictor.simulation.engine.model import (
 LOG = logging.getLogger(__name__)
 #: Cut-off times are located to this accuracy (s).
 CUTOFF_TIME_TOL_S = 1e-7
+#: A cell voltage above this (V) means the model left its range (a particle filled past its maximum
+#: concentration, e.g. a charge pulse on a full cell); no lithium-ion chemistry gets there.
+MAX_CELL_VOLTAGE_V = 6.0
 _MAX_ROOT_ITERATIONS = 100
 
 
@@ -236,11 +239,22 @@ def _run_fused(kernel, model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: 
            float(model.lower_cutoff_v), CUTOFF_TIME_TOL_S, start_v, end_v, end_time, cutoff_step, at_start, z_end)
     if not np.all(np.isfinite(end_time)):
         raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
+    _check_range(start_v, end_v, edges)
     ended_at_start = np.nonzero(at_start)[0]
     start_v[ended_at_start, cutoff_step[ended_at_start]] = np.nan
     return CellRuns(step_start_s=edges[:-1], start_voltage_v=start_v, end_voltage_v=end_v, end_time_s=end_time,
                     reached_cutoff=cutoff_step < n_steps, cutoff_step=cutoff_step,
                     final_state=modal.block_states(z_end), extra={"backend": "numba-fused", "batch": batch})
+
+
+def _check_range(start_v: np.ndarray, end_v: np.ndarray, edges: np.ndarray) -> None:
+    """Raise when a cell voltage left the physical range (see :data:`MAX_CELL_VOLTAGE_V`)."""
+    high = (np.nan_to_num(start_v, nan=0.0) > MAX_CELL_VOLTAGE_V) | (np.nan_to_num(end_v, nan=0.0) > MAX_CELL_VOLTAGE_V)
+    if high.any():
+        step = int(np.argmax(high.any(axis=0)))
+        raise SimulationError(f"the cell was charged past full at {edges[step]:.0f} s (the model's voltage left "
+                              f"its range, above {MAX_CELL_VOLTAGE_V:.0f} V): the initial state is too high for "
+                              "the charge that follows")
 
 
 def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.ndarray, duration_s: np.ndarray,
@@ -253,6 +267,7 @@ def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nd
     end_v = _voltage(model, batch, surfaces[:, 1:], current[None, :])
     if not (np.all(np.isfinite(start_v)) and np.all(np.isfinite(end_v))):
         raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
+    _check_range(start_v, end_v, edges)
     cut = model.lower_cutoff_v
     below = (start_v < cut) | (end_v < cut)
     any_below = below.any(axis=1)
