@@ -7,7 +7,7 @@ VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.setup-stamp
 PYTEST_ARGS ?=
 
-.PHONY: setup demo test lint bags benchmarks clean
+.PHONY: setup demo test test-services lint bags benchmarks clean
 
 setup: $(STAMP)
 
@@ -31,7 +31,20 @@ $(STAMP): requirements.txt constraints.txt setup.py setup.cfg package.xml tools/
 demo: setup
 	$(VENV)/bin/battery-predictor demo
 
-test: setup
+# The fleet test (test/integration/test_fleet_postgres.py) starts a PostgreSQL server of its own. As root
+# with apt-get (CI on Debian), install the server package when it is missing; otherwise, or when the
+# install fails, that test is skipped with the reason and everything else runs.
+POSTGRES_LOG := $(VENV)/postgres-install.log
+test-services:
+	@if ls /usr/lib/postgresql/*/bin/pg_ctl >/dev/null 2>&1 || command -v pg_ctl >/dev/null 2>&1; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "test: installing Debian's postgresql for the fleet test (log: $(POSTGRES_LOG))"; \
+	  { timeout 600 apt-get update && DEBIAN_FRONTEND=noninteractive timeout 900 apt-get install -y \
+	    --no-install-recommends postgresql; } >$(POSTGRES_LOG) 2>&1 \
+	    || echo "test: postgresql could not be installed (see $(POSTGRES_LOG)); the fleet test will be skipped"; \
+	else echo "test: no PostgreSQL server binaries (apt-get install postgresql); the fleet test will be skipped"; fi
+
+test: setup test-services
 	$(VENV)/bin/ruff check battery_predictor test benchmarks
 	$(VPY) -m pytest $(PYTEST_ARGS)
 

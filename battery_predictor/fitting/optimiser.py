@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from battery_predictor.errors import BatteryPredictorError, SimulationError
 from battery_predictor.fitting.problem import FitProblem
 from battery_predictor.fitting.space import FitParameter
+from battery_predictor.fitting.storage import close_storage, open_storage, redacted, worker_id
 
 #: Startup (random) trials per searched parameter, as in the seed paper.
 STARTUP_TRIALS_PER_PARAMETER = 20
@@ -51,6 +52,8 @@ class FitResult:
         Trials the study already held when this run started (a resumed study).
     improved : bool
         False when no trial beat the starting values (the enqueued trial 0 is the best).
+    own_trials : int
+        Finished trials this process ran (the others came from other processes sharing the study).
     """
 
     best_values: dict[str, float]
@@ -62,6 +65,7 @@ class FitResult:
     storage: str
     resumed_trials: int = 0
     improved: bool = True
+    own_trials: int = 0
 
 
 def study_name_for(problem: FitProblem, space: Sequence[FitParameter]) -> str:
@@ -103,10 +107,13 @@ def resumed_study_message(study_name: str, storage: str | None, done: int, n_tri
 
 
 def _objective_factory(problem: FitProblem, space: Sequence[FitParameter]):
+    worker = worker_id()
+
     def objective(trial) -> float:
         values = {p.name: trial.suggest_float(p.name, p.low, p.high, log=p.log) for p in space}
         import optuna
 
+        trial.set_user_attr("worker", worker)
         try:
             ev = problem.evaluate(values)
         except BatteryPredictorError as exc:
@@ -129,15 +136,19 @@ def _worker(storage: str, study_name: str, problem: FitProblem, space, seed: int
 
     optuna.logging.set_verbosity(optuna.logging.ERROR)
     sampler = optuna.samplers.TPESampler(seed=seed, n_startup_trials=n_startup)
-    study = optuna.load_study(study_name=study_name, storage=storage, sampler=sampler)
+    rdb = open_storage(storage)
+    study = optuna.load_study(study_name=study_name, storage=rdb, sampler=sampler)
 
     def stop_when_done(study, _trial) -> None:
         states = (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED)
         if len(study.get_trials(deepcopy=False, states=states)) >= n_trials_total:
             study.stop()
 
-    study.optimize(_objective_factory(problem, space), n_trials=n_trials_total, catch=(SimulationError,),
-                   callbacks=[stop_when_done])
+    try:
+        study.optimize(_objective_factory(problem, space), n_trials=n_trials_total, catch=(SimulationError,),
+                       callbacks=[stop_when_done])
+    finally:
+        close_storage(rdb)
 
 
 class TPEOptimiser:
@@ -150,7 +161,9 @@ class TPEOptimiser:
     seed : int
         Sampler seed (worker ``k`` uses ``seed + k``).
     storage : str or None
-        Optuna storage URL (``sqlite:///fit.db``, ``postgresql://...``); None = in memory.
+        Optuna storage URL (``sqlite:///fit.db``, ``postgresql://...``); None = in memory. Other
+        processes (other machines too) may work on the same study at the same time, each with its
+        own ``seed``: every process stops when the study holds ``n_trials`` finished trials.
     study_name : str or None
         Default: derived from params, data and space.
     workers : int
@@ -182,25 +195,35 @@ class TPEOptimiser:
     def run(self, problem: FitProblem, space: Sequence[FitParameter]) -> FitResult:
         """Run (or resume) the study and return the best values."""
         import optuna
-        from optuna.trial import TrialState
 
         optuna.logging.set_verbosity(optuna.logging.ERROR)
         tic = time.perf_counter()
         n_startup = STARTUP_TRIALS_PER_PARAMETER * len(space)
         name = self.study_name or study_name_for(problem, space)
         sampler = optuna.samplers.TPESampler(seed=self.seed, n_startup_trials=n_startup)
+        storage = open_storage(self.storage)
         try:
-            study = optuna.create_study(study_name=name, storage=self.storage, sampler=sampler,
+            return self._run(optuna, storage, sampler, name, n_startup, problem, space, tic)
+        finally:
+            close_storage(storage)
+
+    def _run(self, optuna, storage, sampler, name: str, n_startup: int, problem: FitProblem,
+             space: Sequence[FitParameter], tic: float) -> FitResult:
+        from optuna.trial import TrialState
+
+        try:
+            study = optuna.create_study(study_name=name, storage=storage, sampler=sampler,
                                         direction="maximize", load_if_exists=True)
-        except Exception as exc:  # storage URL unreachable, bad scheme...
-            raise BatteryPredictorError(f"cannot open Optuna storage {self.storage!r}: {exc}") from None
+        except Exception as exc:  # noqa: BLE001 - storage unreachable, schema of another Optuna...
+            raise BatteryPredictorError(f"cannot open study {name!r} in {redacted(str(self.storage))}: "
+                                        f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
         finished_states = (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED)
         done = len(study.get_trials(deepcopy=False, states=finished_states))
-        if done == 0 and not study.get_trials(deepcopy=False):
-            study.enqueue_trial({p.name: min(max(p.initial, p.low), p.high) for p in space})
+        if done == 0 and not study.get_trials(deepcopy=False):  # the start is trial 0 (once, whoever comes first)
+            study.enqueue_trial({p.name: min(max(p.initial, p.low), p.high) for p in space}, skip_if_exists=True)
         remaining = self.n_trials - done
         if done and self.notice is not None:
-            self.notice(resumed_study_message(name, self.storage, done, self.n_trials))
+            self.notice(resumed_study_message(name, redacted(str(self.storage)), done, self.n_trials))
         bar = None
         if self.progress and remaining > 0:
             from tqdm import tqdm
@@ -246,6 +269,7 @@ class TPEOptimiser:
             reasons = {t.user_attrs.get("error", "?") for t in failed[:5]}
             raise SimulationError(f"every trial failed ({len(failed)}); e.g. {'; '.join(sorted(reasons))}")
         best = study.best_trial
+        me = worker_id()
         return FitResult(
             best_values={k: float(v) for k, v in best.params.items()},
             best_r2_mod=float(best.value),
@@ -253,7 +277,8 @@ class TPEOptimiser:
             failed_trials=len(failed),
             seconds=time.perf_counter() - tic,
             study_name=name,
-            storage=self.storage or "memory",
+            storage=redacted(self.storage) if self.storage else "memory",
             resumed_trials=done,
             improved=best.number != 0,
+            own_trials=sum(1 for t in complete + failed if t.user_attrs.get("worker") == me),
         )
