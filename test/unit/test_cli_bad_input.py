@@ -272,3 +272,30 @@ def test_screen_table_explains_its_runtime_column(monkeypatch, capsys):
     out = capsys.readouterr().out
     assert "runtime %" in out.splitlines()[1]
     assert "runtime %: change of the time to the cut-off when the parameter is raised by 10 %" in out
+
+
+def test_screen_shows_its_progress_on_a_terminal_and_nothing_when_piped(monkeypatch, capsys):
+    """Item 5: the 42 s of ``screen`` showed nothing; now a bar counts the screened parameters."""
+    from battery_predictor.cli import cmd_screen, common
+    from battery_predictor.fitting import screening
+
+    row = screening.ScreeningRow("Electrode height [m]", 0.9, 12.0, 0.95, True)
+
+    def slow_screen(*_a, progress=None, **_k):
+        for _ in range(4):
+            time.sleep(0.15)
+            progress(row)
+        return [row]
+
+    monkeypatch.setattr(screening, "screen", slow_screen)
+    monkeypatch.setitem(common.progress_bar.__wrapped__.__kwdefaults__, "delay_s", 0.2)  # instead of 2 s
+    args = argparse.Namespace(params=TEMI, simulator="fast", c_rate=None, all=False, json=False)
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    cmd_screen.run(args)
+    assert re.search(r"screen:.*\b[1-4]/\d+ \[", terminal.getvalue()), terminal.getvalue()
+    piped = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", piped)
+    cmd_screen.run(args)
+    assert piped.getvalue() == ""
+    capsys.readouterr()
