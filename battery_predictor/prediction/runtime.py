@@ -79,6 +79,8 @@ def peak_voltage_drop_v(runner: PackRunner, start, average_current_a: float, pea
 
 #: Step (s) of the piecewise-constant current that follows a constant power.
 POWER_STEP_S = 60.0
+#: ... at most this many steps over the horizon (longer steps on long horizons).
+POWER_MAX_STEPS = 120
 #: Fixed-point passes of :func:`demand_run` at most, and the current change (relative) that ends them.
 POWER_PASSES = 10
 POWER_TOLERANCE = 0.002
@@ -128,7 +130,8 @@ def demand_run(runner: PackRunner, start, current_a: float, power_w: float, expo
                temperature_k: float, first_voltage_v: float, cutoff_voltage_v: float):
     """The pack under a constant demand ``I V^k``: ``(run, LoadPath)``.
 
-    The current of each :data:`POWER_STEP_S` step is ``current_a^(1-k) (power_w / V)^k`` with
+    The current of each step (:data:`POWER_STEP_S`, longer when the horizon needs more than
+    :data:`POWER_MAX_STEPS` of them) is ``current_a^(1-k) (power_w / V)^k`` with
     the pack voltage ``V`` the previous pass simulated in that step (the first pass takes
     ``first_voltage_v``): a constant current for ``k = 0``, a constant power for ``k = 1``. Passes
     repeat until the currents before the pack reaches ``cutoff_voltage_v`` (but for the last two
@@ -146,9 +149,10 @@ def demand_run(runner: PackRunner, start, current_a: float, power_w: float, expo
         path = LoadPath.constant(current_a, horizon_s)
         return runner.run(start, path.segments(horizon_s), temperature_k), path
     scale = current_a ** (1.0 - exponent) * power_w ** exponent
-    n = max(1, int(math.ceil(horizon_s / POWER_STEP_S)))
-    mid = (np.arange(n) + 0.5) * POWER_STEP_S
-    path = LoadPath(POWER_STEP_S, np.full(n, scale / first_voltage_v ** exponent))
+    step_s = max(POWER_STEP_S, horizon_s / POWER_MAX_STEPS)
+    n = max(1, int(math.ceil(horizon_s / step_s)))
+    mid = (np.arange(n) + 0.5) * step_s
+    path = LoadPath(step_s, np.full(n, scale / first_voltage_v ** exponent))
     last_end_s = math.inf
     for _ in range(POWER_PASSES):
         run = runner.run(start, path.segments(horizon_s), temperature_k)
@@ -156,8 +160,8 @@ def demand_run(runner: PackRunner, start, current_a: float, power_w: float, expo
         t_end = float(run.end_time_s) if t_end is None else t_end
         v = np.interp(mid, run.time_s, run.pack_voltage_v)  # held at the last value after the run ends
         v = np.maximum(v, 0.5 * cutoff_voltage_v)
-        new = LoadPath(POWER_STEP_S, scale / v ** exponent)
-        before = mid < t_end - 2 * POWER_STEP_S  # the steps at the knee follow the crossing time
+        new = LoadPath(step_s, scale / v ** exponent)
+        before = mid < t_end - 2 * step_s  # the steps at the knee follow the crossing time
         change = np.abs(new.current_a[before] - path.current_a[before]) / new.current_a[before]
         settled = change.size == 0 or float(change.max()) < POWER_TOLERANCE
         if settled and abs(t_end - last_end_s) <= POWER_END_TOLERANCE_S:
