@@ -299,3 +299,22 @@ def test_screen_shows_its_progress_on_a_terminal_and_nothing_when_piped(monkeypa
     cmd_screen.run(args)
     assert piped.getvalue() == ""
     capsys.readouterr()
+
+
+def test_replay_progress_counts_bag_minutes(monkeypatch):
+    """Item 5: the demo's and replay's ~30 s replays move a bar in bag minutes (``bag_progress``)."""
+    from types import SimpleNamespace
+
+    from battery_predictor.cli import common
+
+    monkeypatch.setitem(common.progress_bar.__wrapped__.__kwdefaults__, "delay_s", 0.0)
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    stream = SimpleNamespace(start_ns=0, end_ns=300 * 60 * 10**9)
+    with common.bag_progress(stream, None, "replay", enabled=True) as update:
+        on_step = common.bag_step(update, stream)
+        for minute in (60, 150, 300):
+            time.sleep(0.12)  # tqdm redraws at most every 0.1 s
+            on_step(minute * 60 * 10**9)
+    assert re.search(r"replay:.*\b150.0/300.0 \[", terminal.getvalue()), terminal.getvalue()
+    assert "bag min" in terminal.getvalue()
