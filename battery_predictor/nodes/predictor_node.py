@@ -17,10 +17,11 @@ A thin adapter around :class:`battery_predictor.prediction.core.PredictorCore`
   with the route core; the maps come from ``station_file`` / ``task_map_file``. Malformed
   requests are answered with the reason, never an exception.
 
-Threading: three mutually exclusive callback groups -- pack states, the runtime
-timer (the ~0.1 s model run), the service -- so with a
-:class:`~.executor.StartedMultiThreadedExecutor` the service is answered while a
-runtime update runs. The core is thread-safe and caches its SOC calibration, so
+Threading: four mutually exclusive callback groups -- pack states, the runtime
+timer (the ~0.1 s model run), ``can_accept_route``, and the station services
+(``feasible_tasks``, ``plan_route``: up to ~2 s for 100 tasks) -- so with a
+:class:`~.executor.StartedMultiThreadedExecutor` a route is answered while a
+runtime update or a station-service answer runs. The core is thread-safe and caches its SOC calibration, so
 by default the service shares the runtime's model and reuses its calibration;
 ``separate_route_model`` gives the service a model of its own instead (one model
 solves one simulation at a time). ``/diagnostics`` carries the model status, the runtime
@@ -156,6 +157,9 @@ class PredictorNode(Node):
         self.state_group = MutuallyExclusiveCallbackGroup()
         self.runtime_group = MutuallyExclusiveCallbackGroup()
         self.service_group = MutuallyExclusiveCallbackGroup()
+        #: feasible_tasks and plan_route (up to ~2 s for 100 tasks): a group of their own, so a
+        #: can_accept_route answer never waits for them.
+        self.station_group = MutuallyExclusiveCallbackGroup()
         self.create_subscription(PackState, topics["pack_state"], self._on_pack_state, PACK_STATE_QOS,
                                  callback_group=self.state_group)
         self.runtime_pub = self.create_publisher(RemainingRuntime, topics["remaining_runtime"], OUTPUT_QOS)
@@ -163,9 +167,9 @@ class PredictorNode(Node):
         self.route_service = self.create_service(CanAcceptRoute, topics["can_accept_route"], self._on_can_accept_route,
                                                  callback_group=self.service_group)
         self.tasks_service = self.create_service(FeasibleTasks, topics["feasible_tasks"], self._on_feasible_tasks,
-                                                 callback_group=self.service_group)
+                                                 callback_group=self.station_group)
         self.plan_service = self.create_service(PlanRoute, topics["plan_route"], self._on_plan_route,
-                                                callback_group=self.service_group)
+                                                callback_group=self.station_group)
         self.runtime_probe = TimerProbe(self.get_clock())
         self.runtime_timer = self.create_timer(runtime_period_s, self.runtime_probe.wrap(self._on_runtime_timer),
                                                callback_group=self.runtime_group)
