@@ -152,3 +152,38 @@ def test_plan_route_valid_infeasible_and_malformed(ros_context: Context) -> None
 
     assert not low.accepted and "already below the route threshold 46.31 V" in low.reason, low.reason
     assert not any(a.feasible for a in low.alternatives), low.reason
+
+
+#: Another station as a YAML file: a 150 m ramp between two platforms, or a 260 m flat detour by the yard.
+DETOUR_YAML = """
+nodes:
+  charger: {description: charger, x_m: 0, y_m: 0}
+  low: {description: lower platform, x_m: 300, y_m: 0}
+  high: {description: upper platform, x_m: 300, y_m: 60}
+  yard: {description: yard, x_m: 360, y_m: 30}
+edges:
+  - {from: charger, to: low, segments: [{length_m: 300.0, slope: flat}]}
+  - {from: low, to: high, segments: [{length_m: 150.0, slope: uphill}]}
+  - {from: low, to: yard, segments: [{length_m: 130.0, slope: flat}]}
+  - {from: yard, to: high, segments: [{length_m: 130.0, slope: flat}]}
+"""
+
+
+def test_another_station_from_a_yaml_file_offers_the_lower_slope_path(ros_context: Context, tmp_path: Path) -> None:
+    """``station_file`` swaps the graph; with 80 kg the flat detour draws less than the ramp and ends higher."""
+    station = tmp_path / "detour_station.yaml"
+    station.write_text(DETOUR_YAML)
+    stream = stream_from_messages(samples(0.0, 60.0, 47.4, 1.7), style="battery_state", battery_topic="/battery_state")
+    with ReplaySession(stream, context=ros_context, params_file=str(REPO / "params/ros/ranger_nodes.yaml"),
+                       predictor_overrides={"runtime_period_s": 30.0, "station_file": str(station)},
+                       rate=0) as session:
+        session.play_until()
+        answer = call(session, PlanRoute.Request(start_node="charger", pickup="low", dropoff="high", payload_kg=80.0))
+    assert list(answer.nodes) == ["charger", "low", "high", "low", "charger"], answer.reason
+    assert not answer.accepted and answer.margin_v < 0, answer.reason
+    kinds = {a.kind: a for a in answer.alternatives}
+    detour = kinds[PlannedRoute.KIND_LEAST_CHARGE_PATH]
+    assert list(detour.nodes) == ["charger", "low", "yard", "high", "low", "charger"]
+    assert detour.route_charge_ah < answer.route_charge_ah and detour.margin_v > answer.margin_v, detour.reason
+    assert "0 m uphill instead of 150 m" in detour.reason
+    assert kinds[PlannedRoute.KIND_CHARGE_FIRST].feasible
