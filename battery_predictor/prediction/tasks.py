@@ -187,7 +187,7 @@ class TaskOutcome:
     margin_v : float
         Lowest predicted voltage over the task and the walk back minus the cut-off, V.
     remaining_after_s : float
-        Time from the end of the task until the cut-off at the present average load, s (NaN when not
+        Time from the end of the task until the cut-off at the present average current, s (NaN when not
         evaluated; the model's longest horizon when beyond it).
     end_location : str
         Where the task ends ("" when unknown).
@@ -524,7 +524,7 @@ def feasible_tasks(core, tasks: Sequence[Task], location: str, policy: str, now_
                                                f"{core.state_tolerance_v:.2f} V): state uncertain", cutoff)
         runtime = core.remaining_runtime(now_s)
         average = runtime.assumed_current_a
-        load_note = f"present average load {average:.2f} A"
+        load_note = f"present average current {average:.2f} A"
         if not (math.isfinite(average) and average > 0):
             average = fallback_current_a
             load_note = f"no discharge load in the present cycle yet: the usage model's mean {average:.2f} A"

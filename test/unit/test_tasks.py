@@ -171,7 +171,7 @@ def test_answers_from_the_core_state(core, task_map, loads):
     stale = ask(charged, now_s=5000.0)
     assert not stale.valid and "stale" in stale.reason
     ok = ask(charged)
-    assert ok.valid and ok.outcomes[0].feasible and "present average load 1.70 A" in ok.reason
+    assert ok.valid and ok.outcomes[0].feasible and "present average current 1.70 A" in ok.reason
     assert 0.0 < ok.state_of_charge <= 1.0
     empty = ask(fed_core(core, 13.2))
     assert empty.valid and not empty.outcomes[0].feasible and "at or below the cut-off" in empty.reason
