@@ -183,8 +183,9 @@ def test_params_directory_is_named_a_directory():
 
 
 def test_repeated_timestamp_says_so_and_names_duplicate_times(tmp_path):
+    # diagnose keeps the last row of a repeated time by default (issue 12); simulate and fit refuse
     body = "0,16.0,2.0\n5,15.99,2.0\n5,15.98,2.0\n10,15.97,2.0\n"
-    message = _one_line_error(_run("diagnose", "--params", TEMI, "--data", _csv(tmp_path, body)),
+    message = _one_line_error(_run("simulate", "--params", TEMI, "--data", _csv(tmp_path, body)),
                               "repeats the time of line 3", "use --duplicate-times keep_last")
     assert "not greater than" not in message
 
