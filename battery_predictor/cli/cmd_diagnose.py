@@ -72,9 +72,11 @@ def _load(paths, args, params):
     if args.trim:
         recs = [trim_to_discharge(r) for r in recs]
     if args.resample:
-        from battery_predictor.diagnosis.engine import window_average
+        # the windows of 'fit --resample' (the first sample, the state before the load, kept), so that the
+        # reference fit sees what 'fit' sees
+        from battery_predictor.fitting.resample import resample_windows
 
-        recs = [window_average(r, args.resample) for r in recs]
+        recs = [resample_windows(r, args.resample) for r in recs]
     return recs
 
 

@@ -321,8 +321,8 @@ class Engine:
                repr(pv["Positive electrode OCP [V]"]))
         if key not in self._windows:
             grid = np.linspace(1e-6, 1.0 - 1e-6, 20001)
-            self._windows[key] = (grid, _evaluate_ocp(pv["Negative electrode OCP [V]"], grid),
-                                  _evaluate_ocp(pv["Positive electrode OCP [V]"], grid))
+            self._windows[key] = (grid, _evaluate_ocp(pv["Negative electrode OCP [V]"], grid, pv),
+                                  _evaluate_ocp(pv["Positive electrode OCP [V]"], grid, pv))
         return self._windows[key]
 
     def parameter_values(self, params: PackParams):
@@ -537,8 +537,12 @@ class Engine:
                       end_time_s=float(t_sol_end), temperature_k=temp)
 
 
-def _evaluate_ocp(fn, sto: np.ndarray) -> np.ndarray:
-    """An OCP of a PyBaMM parameter set (function of stoichiometry, or data) on ``sto``."""
+def _evaluate_ocp(fn, sto: np.ndarray, pv=None) -> np.ndarray:
+    """An OCP of a PyBaMM parameter set (function of stoichiometry, or data) on ``sto``.
+
+    ``pv`` (the parameter values) resolves parameters the function refers to (a measured OCP's
+    coefficients, :mod:`battery_predictor.ocp`).
+    """
     import inspect
 
     import pybamm
@@ -551,6 +555,8 @@ def _evaluate_ocp(fn, sto: np.ndarray) -> np.ndarray:
     n_args = len(inspect.signature(fn).parameters)
     args = [pybamm.Vector(sto)] + [pybamm.Scalar(298.15)] * (n_args - 1)
     out = fn(*args)
+    if isinstance(out, pybamm.Symbol) and pv is not None:
+        out = pv.process_symbol(out)
     val = out.evaluate() if isinstance(out, pybamm.Symbol) else out
     return np.asarray(val, dtype=float).ravel()
 

@@ -132,3 +132,14 @@ def test_diagnose_cli_reads_a_file_with_a_repeated_timestamp(tmp_path):
                           capture_output=True, text=True, timeout=600)
     assert "not greater than" not in proc.stderr and "repeats the time" not in proc.stderr, proc.stderr
     assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+@pytest.mark.skipif(not (REPO / "docs" / "runtime_real_data" / "panasonic_ocv.yaml").is_file(),
+                    reason="no params file with a measured OCP")
+def test_the_soc_window_of_a_measured_ocp_is_evaluated_with_its_parameters():
+    """A measured OCP refers to parameters of its own (battery_predictor.ocp); the diagnosis resolves them."""
+    from battery_predictor.diagnosis.engine import Engine
+
+    params = load_params(REPO / "docs" / "runtime_real_data" / "panasonic_ocv.yaml")
+    x0, x100, y100, y0 = Engine().stoichiometry_window(params)
+    assert 0.0 < x0 < x100 < 1.0 and 0.0 < y100 < y0 < 1.0
