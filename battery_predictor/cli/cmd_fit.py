@@ -21,6 +21,7 @@ from battery_predictor.cli.common import (
     print_json,
     progress_wanted,
 )
+from battery_predictor.simulation import SIMULATORS
 
 #: Default budget of ``--method identify`` in model evaluations.
 DEFAULT_EVALUATIONS = 1000
@@ -52,8 +53,9 @@ def register(sub) -> None:
     p.add_argument("--workers", type=int, default=1, help="processes working on the study (default 1)")
     p.add_argument("--parameters", nargs="+", default=None,
                    help="fit these parameters instead of the params' fit.parameters")
-    p.add_argument("--simulator", choices=("fast", "liionpack", "engine"), default="fast",
-                   help="fast (PyBaMM), liionpack (reference) or engine (the SPM engine, much faster)")
+    p.add_argument("--simulator", choices=SIMULATORS, default=SIMULATORS[0],
+                   help="engine (default: PyBaMM's SPM stepped exactly, milliseconds per day; hands what it does not "
+                        "cover to fast and says so), fast (PyBaMM's solver) or liionpack (reference)")
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto")
     p.add_argument("--out", required=True, help="fitted params YAML to write")
     p.add_argument("--plot", default=None, help="PNG of measured vs simulated (default: <out>.png)")

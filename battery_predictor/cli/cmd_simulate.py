@@ -5,14 +5,16 @@ from __future__ import annotations
 import time
 
 from battery_predictor.cli.common import add_data_arguments, check_plot_file, data_options, load_data, print_json
+from battery_predictor.simulation import SIMULATORS
 
 
 def register(sub) -> None:
     p = sub.add_parser("simulate", help="score a params file on measured data (R2_mod, RMSE, runtime)")
     p.add_argument("--params", required=True, help="params YAML (e.g. the output of fit)")
     add_data_arguments(p)
-    p.add_argument("--simulator", choices=("fast", "liionpack", "engine"), default="fast",
-                   help="fast (PyBaMM), liionpack (reference) or engine (the SPM engine, much faster)")
+    p.add_argument("--simulator", choices=SIMULATORS, default=SIMULATORS[0],
+                   help="engine (default: PyBaMM's SPM stepped exactly, milliseconds per day; hands what it does not "
+                        "cover to fast and says so), fast (PyBaMM's solver) or liionpack (reference)")
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto",
                    help="initial state: params' concentrations or first measured voltage (default auto)")
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",

@@ -12,11 +12,7 @@ from battery_predictor.ocp import ocp_origin
 
 
 def simulator_named(name: str):
-    """The simulator of ``--simulator``: ``engine`` (the SPM engine) or one of :func:`get_simulator`'s."""
-    if name == "engine":
-        from battery_predictor.simulation.engine import EngineSimulator
-
-        return EngineSimulator()
+    """The simulator of ``--simulator`` (:func:`~battery_predictor.simulation.get_simulator`)."""
     from battery_predictor.simulation import get_simulator
 
     return get_simulator(name)
