@@ -274,6 +274,7 @@ def test_choose_best_compares_the_error_above_the_noise():
     (10.0, 6.0, 4.0, 6.0, True),     # restores the reference fit's RMSE (floor 6 mV) with 40 % gain
     (20.0, 7.0, 8.0, 8.0, True),     # 2.5x the floor, restored
     (30.0, 9.5, 8.0, 8.0, False),    # 3.75x, 9.5 > 1.1 x 8 mV: not restored, and not above 4x
+    (25.5, 16.1, 3.0, 38.8, False),  # the baseline is below its floor already: nothing to restore
 ])
 def test_claim_needs_a_clear_baseline_error_or_a_restored_floor(base, best, noise, floor, allowed):
     assert claim_allowed(base, best, noise, floor) is allowed
