@@ -72,6 +72,14 @@ class OutputRecorderNode(Node):
         with self._lock:
             return len(self.messages.get(topic, []))
 
+    def drain(self) -> dict[str, list]:
+        """The messages received so far per topic, forgotten here (a long replay's memory stays flat)."""
+        with self._lock:
+            out = {topic: list(msgs) for topic, msgs in self.messages.items()}
+            for msgs in self.messages.values():
+                msgs.clear()
+        return out
+
     def snapshot(self, topic: str) -> list:
         """A copy of the messages received on ``topic``."""
         with self._lock:
