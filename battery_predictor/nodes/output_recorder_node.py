@@ -49,6 +49,8 @@ class OutputRecorderNode(Node):
         self._lock = threading.Lock()
         #: Received messages per topic, in arrival order.
         self.messages: dict[str, list] = {topic: [] for topic in topics}
+        #: Messages per topic handed out by :meth:`drain` (still counted by :meth:`count`).
+        self._drained: dict[str, int] = {topic: 0 for topic in topics}
         group = MutuallyExclusiveCallbackGroup()
         for topic, msgtype in topics.items():
             self.create_subscription(OUTPUT_TYPES[msgtype], topic, self._callback(topic, msgtype), RECORDER_QOS,
@@ -68,15 +70,19 @@ class OutputRecorderNode(Node):
         return on_message
 
     def count(self, topic: str) -> int:
-        """Messages received on ``topic``."""
+        """Messages received on ``topic`` (drained ones included)."""
         with self._lock:
-            return len(self.messages.get(topic, []))
+            return len(self.messages.get(topic, [])) + self._drained.get(topic, 0)
 
     def drain(self) -> dict[str, list]:
-        """The messages received so far per topic, forgotten here (a long replay's memory stays flat)."""
+        """The messages kept so far per topic, forgotten here (a long replay's memory stays flat).
+
+        :meth:`count` still counts them; :meth:`snapshot` returns only what came after.
+        """
         with self._lock:
             out = {topic: list(msgs) for topic, msgs in self.messages.items()}
-            for msgs in self.messages.values():
+            for topic, msgs in self.messages.items():
+                self._drained[topic] += len(msgs)
                 msgs.clear()
         return out
 
