@@ -229,14 +229,47 @@ KIND_BLOCK_S = 300.0
 MIN_KIND_BLOCKS = 8
 #: Least difference of the two trend statistics for the data to decide.
 MIN_KIND_SEPARATION = 3.0
+#: A steady load is seen on blocks of this length (s): at least :data:`MIN_STEADY_BLOCKS` of them
+#: (not counting the first and the last) whose current (or power) spreads by less than
+#: :data:`STEADY_SPREAD` (relative) while the other spreads by more than twice that is a constant
+#: current (or power), decided at once.
+STEADY_BLOCK_S = 60.0
+MIN_STEADY_BLOCKS = 5
+STEADY_SPREAD = 0.01
 
 
-def _block_means(t: np.ndarray, values: list[np.ndarray]) -> list[np.ndarray]:
-    """Means of each array over consecutive :data:`KIND_BLOCK_S` blocks of ``t`` (empty blocks dropped)."""
-    index = np.floor((t - t[0]) / KIND_BLOCK_S).astype(int)
+def _block_means(t: np.ndarray, values: list[np.ndarray], block_s: float = KIND_BLOCK_S) -> list[np.ndarray]:
+    """Means of each array over consecutive ``block_s`` blocks of ``t`` (empty blocks dropped)."""
+    index = np.floor((t - t[0]) / block_s).astype(int)
     counts = np.bincount(index)
     keep = counts > 0
     return [np.bincount(index, weights=v)[keep] / counts[keep] for v in values]
+
+
+def _spread(values: np.ndarray) -> float:
+    """Range of ``values`` relative to their mean magnitude."""
+    return float(np.ptp(values)) / max(float(np.mean(np.abs(values))), 1e-12)
+
+
+def _steady_kind(t: np.ndarray, i: np.ndarray, power: np.ndarray) -> LoadKind | None:
+    """A constant current or power seen directly on :data:`STEADY_BLOCK_S` blocks, else None."""
+    _, ib, pb = _block_means(t, [t, i, power], STEADY_BLOCK_S)
+    ib, pb = ib[1:-1], pb[1:-1]  # the first and last block hold the load's switching on and off
+    if ib.size < MIN_STEADY_BLOCKS:
+        return None
+    spread_i, spread_p = _spread(ib), _spread(pb)
+    if spread_i < STEADY_SPREAD < spread_p / 2:
+        return LoadKind(0.0, 0.0, math.nan, int(ib.size), True)
+    if spread_p < STEADY_SPREAD < spread_i / 2:
+        return LoadKind(1.0, math.nan, 0.0, int(ib.size), True)
+    return None
+
+
+def _trend(t: np.ndarray, values: np.ndarray, spearmanr) -> float:
+    """Spearman's rank correlation of ``values`` with ``t``; 0 (no trend) for a constant series."""
+    if np.ptp(values) <= 1e-9 * max(float(np.max(np.abs(values))), 1e-12):
+        return 0.0  # a constant current (a CC discharge) has no trend, and rank statistics are undefined
+    return float(spearmanr(t, values).statistic)
 
 
 def load_kind(stamps_s, currents_a, voltages_v, resistance_ohm: float, prior: float) -> LoadKind:
@@ -249,7 +282,9 @@ def load_kind(stamps_s, currents_a, voltages_v, resistance_ohm: float, prior: fl
     sqrt(blocks - 1): ``z_current`` and ``z_power``. The exponent is where the trend of ``I V^k``
     would vanish, interpolated linearly between them and clipped to 0..1; ``prior`` with fewer
     than :data:`MIN_KIND_BLOCKS` blocks or when the statistics differ by less than
-    :data:`MIN_KIND_SEPARATION` (the voltage has not moved enough to tell).
+    :data:`MIN_KIND_SEPARATION` (the voltage has not moved enough to tell). A steady load (a
+    constant-current or constant-power test, :data:`STEADY_SPREAD`) is decided first, on shorter
+    blocks, without the trends.
 
     Parameters
     ----------
@@ -272,13 +307,16 @@ def load_kind(stamps_s, currents_a, voltages_v, resistance_ohm: float, prior: fl
         return LoadKind(prior, math.nan, math.nan, 0, False)
     r_ohm = resistance_ohm if math.isfinite(resistance_ohm) else 0.0
     power = i * (v + i * r_ohm)
+    steady = _steady_kind(t[ok], i[ok], power[ok])
+    if steady is not None:
+        return steady
     tb, ib, pb = _block_means(t[ok], [t[ok], i[ok], power[ok]])
     n = int(tb.size)
     if n < MIN_KIND_BLOCKS:
         return LoadKind(prior, math.nan, math.nan, n, False)
     root = math.sqrt(n - 1)
-    z_current = float(spearmanr(tb, ib).statistic) * root
-    z_power = float(spearmanr(tb, pb).statistic) * root
+    z_current = _trend(tb, ib, spearmanr) * root
+    z_power = _trend(tb, pb, spearmanr) * root
     if not (math.isfinite(z_current) and math.isfinite(z_power)) or abs(z_current - z_power) < MIN_KIND_SEPARATION:
         return LoadKind(prior, z_current, z_power, n, False)
     exponent = min(max(z_current / (z_current - z_power), 0.0), 1.0)

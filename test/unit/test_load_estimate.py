@@ -174,3 +174,17 @@ def test_load_kind_finds_a_power_load_in_measured_drive_cycles():
         found = load_kind(t, i, v, 0.05, prior=1.0)
         assert found.z_current > 1.5 and abs(found.z_power) < 1.0, (name, found)  # the current trends, the power not
         assert found.exponent >= 0.7, (name, found)  # never taken for a current load
+
+
+def test_a_constant_current_discharge_is_a_current_load():
+    from battery_predictor.prediction.load_estimate import load_kind
+
+    t = np.arange(0.0, 3600.0, 5.0)
+    i = np.full(t.size, 5.0)
+    v = 4.1 - 0.8 * t / t[-1]
+    found = load_kind(t, i, v, 0.02, prior=1.0)
+    assert found.decided and found.exponent == 0.0
+    early = load_kind(t[:120], i[:120] + 0.001 * np.sin(t[:120]), v[:120], 0.02, prior=1.0)  # 10 min, sensor noise
+    assert early.decided and early.exponent == 0.0
+    power = load_kind(t, 20.0 / v, v, 0.0, prior=0.0)  # a constant-power test
+    assert power.decided and power.exponent == 1.0
