@@ -266,6 +266,9 @@ class Post:
         Contact resistance per cell (Ohm).
     weak_fraction : float
         Capacity fraction of the weak series group (1 = none).
+    cold_resistance_ohm : float
+        Arrhenius cell resistance at 298.15 K (Ohm per cell): its excess at the cell temperature
+        (:func:`~battery_predictor.diagnosis.extensions_impl.cold_resistance_excess_ohm`) drops each cell's voltage.
     series_activation_j_mol : float
         Arrhenius activation energy of the pack's series resistance ``R_eq`` (fitted at the
         reference temperature): at cell temperature T it is ``R_eq exp(E/R (1/T - 1/T_ref))``.
@@ -274,6 +277,7 @@ class Post:
     contact_resistance_ohm: float = 0.0
     weak_fraction: float = 1.0
     series_activation_j_mol: float = 0.0
+    cold_resistance_ohm: float = 0.0
 
 
 # --------------------------------------------------------------------------- engine
@@ -512,8 +516,13 @@ class Engine:
         v_cells = [np.asarray(s["Terminal voltage [V]"](t_eval), dtype=float) - i_cell * post.contact_resistance_ohm
                    for s in sols]
         temp = None
-        if want_temperature or post.series_activation_j_mol:
+        if want_temperature or post.series_activation_j_mol or post.cold_resistance_ohm:
             temp = np.asarray(sols[0]["Volume-averaged cell temperature [K]"](t_eval), dtype=float)
+        if post.cold_resistance_ohm:
+            from battery_predictor.diagnosis.extensions_impl import cold_resistance_excess_ohm
+
+            drop = i_cell * cold_resistance_excess_ohm(post.cold_resistance_ohm, temp)
+            v_cells = [v - drop for v in v_cells]
         r_eq_t = r_eq
         if post.series_activation_j_mol:
             r_eq_t = r_eq * series_resistance_factor(temp, post.series_activation_j_mol)

@@ -71,6 +71,13 @@ EA_KINETICS = "Exchange-current density extra activation energy [J.mol-1]"
 EA_POS_FULL = "Positive particle diffusivity extra activation energy at full lithiation [J.mol-1]"
 #: Stoichiometry above which :data:`EA_POS_FULL` starts to act.
 LITHIATION_ONSET = 0.5
+#: Ohmic cell resistance that follows Arrhenius (electrolyte, SEI) and that the SPM lacks, stated at
+#: 298.15 K (Ohm per cell). Only its *excess* over 298.15 K is added, ``R (exp(E/R (1/T - 1/T_ref)) - 1)``:
+#: at the reference temperature the identified model is unchanged.
+COLD_RESISTANCE = "Arrhenius cell resistance at 298.15 K [Ohm]"
+#: Activation energy of :data:`COLD_RESISTANCE` (J/mol): 30 kJ/mol, between the electrolyte's ionic
+#: conductivity (10-20 kJ/mol) and the SEI / charge transfer (50-70 kJ/mol) of graphite cells.
+COLD_RESISTANCE_ACTIVATION_J_MOL = 30000.0
 HEAT_TRANSFER = "Total heat transfer coefficient [W.m-2.K-1]"
 CONTACT_RESISTANCE = "Contact resistance [Ohm]"
 CURRENT_OFFSET = "Current sensor offset [A]"
@@ -99,7 +106,7 @@ _OPTIONS = {
 #: Default values of each extension's own keys (the extension is then present but neutral, except
 #: the hysteresis, whose neutral value would be no hysteresis).
 EXTENSION_DEFAULTS: dict[str, dict[str, float]] = {
-    "temperature": {EA_NEG: 0.0, EA_POS: 0.0, EA_SERIES: 0.0, EA_KINETICS: 0.0, EA_POS_FULL: 0.0},
+    "temperature": {EA_NEG: 0.0, EA_POS: 0.0, EA_SERIES: 0.0, EA_KINETICS: 0.0, EA_POS_FULL: 0.0, COLD_RESISTANCE: 0.0},
     "resistance_growth": {CONTACT_RESISTANCE: 0.0},
     "current_offset": {CURRENT_OFFSET: 0.0},
     "cell_imbalance": {WEAK_FRACTION: 1.0},
@@ -151,7 +158,25 @@ def series_resistance_factor(params, temperature_k):
     if "temperature" not in params.extensions:
         return np.ones_like(np.asarray(temperature_k, dtype=float))
     ea = extension_value(params, EA_SERIES)
-    return np.exp(ea / R_GAS * (1.0 / np.asarray(temperature_k, dtype=float) - 1.0 / 298.15))
+    factor = np.exp(ea / R_GAS * (1.0 / np.asarray(temperature_k, dtype=float) - 1.0 / 298.15))
+    r_cold = extension_value(params, COLD_RESISTANCE)
+    if r_cold:  # the cells' Arrhenius excess, carried by the pack's series resistance
+        from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+        ic = params.interconnect
+        r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, ic["r_b_ohm"], ic["r_c_ohm"],
+                                                 ic["r_t_ohm"])
+        if r_eq > 0:
+            factor = factor + params.series / params.parallel * cold_resistance_excess_ohm(r_cold, temperature_k) / r_eq
+    return factor
+
+
+def cold_resistance_excess_ohm(r_ref_ohm: float, temperature_k):
+    """Excess of the Arrhenius cell resistance over its 298.15 K value (Ohm per cell, 0 above 298.15 K's value)."""
+    import numpy as np
+
+    t = np.asarray(temperature_k, dtype=float)
+    return r_ref_ohm * (np.exp(COLD_RESISTANCE_ACTIVATION_J_MOL / R_GAS * (1.0 / t - 1.0 / 298.15)) - 1.0)
 
 
 def extension_model_type(params) -> str:

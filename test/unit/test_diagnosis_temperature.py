@@ -74,3 +74,16 @@ def test_rest_soc_box_narrows_the_start_of_a_recording_that_starts_at_rest():
     lo, hi = rest_soc_box(Engine(), params, at_rest, tol_v=0.02)
     assert 0.0 < lo < hi < 1.0 and hi - lo < 0.3
     assert rest_soc_box(Engine(), params, loaded, tol_v=0.02) == (0.0, 1.0)
+
+
+def test_arrhenius_cell_resistance_adds_only_its_excess_over_the_reference_temperature():
+    r_ref = 0.01
+    assert float(ext.cold_resistance_excess_ohm(r_ref, 298.15)) == pytest.approx(0.0, abs=1e-15)
+    cold = float(ext.cold_resistance_excess_ohm(r_ref, 273.15))
+    expected = r_ref * (math.exp(ext.COLD_RESISTANCE_ACTIVATION_J_MOL / ext.R_GAS * (1 / 273.15 - 1 / 298.15)) - 1)
+    assert cold == pytest.approx(expected) and 0.015 < cold < 0.025  # about 2x the 298.15 K value at 0 degC
+    # the predictor's runner carries it through the pack's series resistance factor
+    temi = load_params(PARAMS / "temi.yaml")
+    params = replace(temi, extensions=("temperature",), extra={**dict(temi.extra), ext.COLD_RESISTANCE: r_ref})
+    assert float(ext.series_resistance_factor(params, 298.15)) == pytest.approx(1.0)
+    assert float(ext.series_resistance_factor(params, 273.15)) > 1.0
