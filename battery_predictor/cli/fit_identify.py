@@ -77,7 +77,7 @@ def run_identify(args) -> int:
         "evaluations": result.evaluations,
         "seed": args.seed,
         "simulator": args.simulator,
-        "ocp": f"{params.base_parameter_set} (base set)",
+        "ocp": ocp_origin(params),
         "identifiability": report.to_dict(),
         "started_from": str(args.params),
     }, fit=params.fit)
@@ -89,7 +89,7 @@ def run_identify(args) -> int:
                     "rmse_mv_per_file": best.rmse_mv, "evaluations": result.evaluations,
                     "tpe_evaluations": result.tpe_evaluations, "seconds": result.seconds,
                     "coordinates": result.coordinates, "params": best.values[0],
-                    "identifiability": report.to_dict(), "ocp": f"{params.base_parameter_set} (base set)",
+                    "identifiability": report.to_dict(), "ocp": ocp_origin(params),
                     "out": str(out), "plot": str(plot_path)})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "

@@ -17,8 +17,11 @@ import numpy as np
 
 #: Correlations above this (in absolute value) are reported as compensating pairs.
 CORRELATION_THRESHOLD = 0.95
-#: An eigen-direction whose eigenvalue is below this fraction of the largest is undetermined.
-EIGENVALUE_RATIO_UNDETERMINED = 1e-6
+#: An eigen-direction of the Fisher matrix in normalised units (ln for log parameters, the search
+#: range for the others) is undetermined when its 95 % half-interval exceeds this: a factor e, or
+#: the whole search range. (A ratio of eigenvalues is not used: it compares coordinates of
+#: different units, and a well-measured resistance looked undetermined beside a capacity.)
+UNDETERMINED_HALF_WIDTH = 1.0
 #: A parameter is "determined" when its 95 % half-interval is below this (relative for log
 #: parameters, fraction of the search range otherwise).
 DETERMINED_HALF_WIDTH = 0.1
@@ -109,9 +112,10 @@ def analyse(names: Sequence[str], values: Sequence[float], log_scale: Sequence[b
     fisher = jac.T @ jac
     cov = sigma2 * np.linalg.pinv(fisher, rcond=1e-12)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    eigval, eigvec = np.linalg.eigh(fisher)
-    largest = float(eigval.max()) if eigval.size else 0.0
-    undetermined_dir = eigval < EIGENVALUE_RATIO_UNDETERMINED * largest
+    unit = np.array([1.0 if log_scale[i] else float(ranges[i][1] - ranges[i][0]) for i in range(n)])
+    eigval, eigvec = np.linalg.eigh(fisher * np.outer(unit, unit))
+    half_dir = _Z95 * np.sqrt(sigma2 / np.maximum(eigval, 1e-300))
+    undetermined_dir = half_dir > UNDETERMINED_HALF_WIDTH
     lows, highs, determined = [], [], []
     for i in range(n):
         weak = bool(np.any(undetermined_dir & (np.abs(eigvec[i, :]) > 0.3)))
