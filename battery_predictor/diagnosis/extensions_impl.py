@@ -155,10 +155,11 @@ def series_resistance_factor(params, temperature_k):
     """
     import numpy as np
 
+    from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
+
     if "temperature" not in params.extensions:
         return np.ones_like(np.asarray(temperature_k, dtype=float))
-    ea = extension_value(params, EA_SERIES)
-    factor = np.exp(ea / R_GAS * (1.0 / np.asarray(temperature_k, dtype=float) - 1.0 / 298.15))
+    factor = arrhenius_factor(temperature_k, extension_value(params, EA_SERIES))
     r_cold = extension_value(params, COLD_RESISTANCE)
     if r_cold:  # the cells' Arrhenius excess, carried by the pack's series resistance
         from battery_predictor.simulation.network import equivalent_network_resistance_ohm

@@ -32,7 +32,7 @@ from battery_predictor.simulation.cell_setup import (
     prepared_parameter_values,
     quiet_pybamm,
 )
-from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
+from battery_predictor.simulation.engine.pack import pack_voltage_v
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 #: Width (s) of the ramp that stands for each current step in the interpolant.
@@ -196,12 +196,11 @@ class FastPackSimulator:
         p = params.interconnect
         r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
                                                  p["r_t_ohm"])
-        if "temperature" in params.extensions:  # extension temperature: Arrhenius series resistance
-            from battery_predictor.diagnosis.extensions_impl import EA_SERIES, extension_value
+        if "temperature" in params.extensions:  # extension temperature: Arrhenius series and cell resistance
+            from battery_predictor.diagnosis.extensions_impl import series_resistance_factor as temperature_factor
 
-            r_eq = r_eq * series_resistance_factor(
-                np.asarray(sol["Volume-averaged cell temperature [K]"](t_eval), dtype=float),
-                extension_value(params, EA_SERIES))
+            r_eq = r_eq * temperature_factor(
+                params, np.asarray(sol["Volume-averaged cell temperature [K]"](t_eval), dtype=float))
         v_pack = pack_voltage_v(v_cell, i_pack, series=params.series, r_eq_ohm=r_eq)
         if not np.all(np.isfinite(v_pack)):
             raise SimulationError("fast simulation produced non-finite voltages")
