@@ -25,11 +25,11 @@ from std_msgs.msg import Float64
 from battery_predictor.nodes.replay_session import ReplaySession
 from battery_predictor.replay import BagMessage, stream_from_messages
 
+from ._helpers import T0_NS, S, call_service
+
 pytestmark = pytest.mark.ros
 
 REPO = Path(__file__).resolve().parents[2]
-T0_NS = 1_704_067_200 * 10**9
-S = 10**9
 
 
 def relay(start_s: float, end_s: float, voltage_v: float, current_a: float) -> list[BagMessage]:
@@ -44,20 +44,8 @@ def relay(start_s: float, end_s: float, voltage_v: float, current_a: float) -> l
 
 
 def call(session: ReplaySession, request: FeasibleTasks.Request, timeout_s: float = 60.0) -> FeasibleTasks.Response:
-    """Call /feasible_tasks over the middleware from the session's client node."""
-    client = session.client_node.create_client(FeasibleTasks, session.predictor.tasks_service.srv_name)
-    try:
-        deadline = time.monotonic() + timeout_s
-        while not client.service_is_ready():
-            assert time.monotonic() < deadline, "feasible_tasks service not discovered"
-            time.sleep(0.01)
-        future = client.call_async(request)
-        while not future.done():
-            assert time.monotonic() < deadline, "no feasible_tasks response"
-            time.sleep(0.005)
-        return future.result()
-    finally:
-        session.client_node.destroy_client(client)
+    """Call the service over the middleware from the session's client node."""
+    return call_service(session, FeasibleTasks, session.predictor.tasks_service.srv_name, request, timeout_s)
 
 
 def task(name: str, kind: int, duration_s: float = 0.0, destination: str = "", **kw) -> Task:

@@ -21,20 +21,18 @@ import pytest
 from battery_predictor_msgs.msg import PlannedRoute
 from battery_predictor_msgs.srv import CanAcceptRoute, PlanRoute
 from rclpy.context import Context
-from rclpy.serialization import serialize_message
-from sensor_msgs.msg import BatteryState
 
-from battery_predictor.conventions import internal_current_to_battery_state
-from battery_predictor.nodes.messages import ns_to_stamp, route_section_msgs
+from battery_predictor.nodes.messages import route_section_msgs
 from battery_predictor.nodes.replay_session import ReplaySession
 from battery_predictor.profiles.ranger import longest_route
-from battery_predictor.replay import BagMessage, stream_from_messages
+from battery_predictor.replay import stream_from_messages
+
+from ._helpers import T0_NS, S, call_service
+from ._helpers import battery_state_samples as samples
 
 pytestmark = pytest.mark.ros
 
 REPO = Path(__file__).resolve().parents[2]
-T0_NS = 1_704_067_200 * 10**9
-S = 10**9
 JOB = dict(start_node="platform13_north", pickup="platform11_south", dropoff="platform13_south", payload_kg=80.0)
 MALFORMED = {
     "'platform99' is not a node": dict(JOB, start_node="platform99"),
@@ -66,32 +64,11 @@ def random_request(rng: np.random.Generator) -> PlanRoute.Request:
                              unloading_s=num(60.0), speed_m_s=num(0.0))
 
 
-def samples(start_s: float, end_s: float, voltage_v: float, current_a: float) -> list[BagMessage]:
-    out = []
-    for k in range(round(end_s - start_s)):
-        t_ns = T0_NS + round((start_s + k) * S)
-        msg = BatteryState(voltage=voltage_v, current=float(internal_current_to_battery_state(current_a)),
-                           temperature=25.0, present=True)
-        msg.header.stamp = ns_to_stamp(t_ns)
-        out.append(BagMessage(t_ns, "/battery_state", "sensor_msgs/msg/BatteryState", serialize_message(msg)))
-    return out
 
 
 def call(session: ReplaySession, request: PlanRoute.Request, timeout_s: float = 60.0) -> PlanRoute.Response:
-    """Call /plan_route over the middleware from the session's client node."""
-    client = session.client_node.create_client(PlanRoute, session.predictor.plan_service.srv_name)
-    try:
-        deadline = time.monotonic() + timeout_s
-        while not client.service_is_ready():
-            assert time.monotonic() < deadline, "plan_route service not discovered"
-            time.sleep(0.01)
-        future = client.call_async(request)
-        while not future.done():
-            assert time.monotonic() < deadline, "no plan_route response"
-            time.sleep(0.005)
-        return future.result()
-    finally:
-        session.client_node.destroy_client(client)
+    """Call the service over the middleware from the session's client node."""
+    return call_service(session, PlanRoute, session.predictor.plan_service.srv_name, request, timeout_s)
 
 
 def test_plan_route_valid_infeasible_and_malformed(ros_context: Context) -> None:

@@ -14,31 +14,20 @@ import pytest
 from battery_predictor_msgs.msg import RemainingRuntime
 from battery_predictor_msgs.srv import CanAcceptRoute
 from rclpy.context import Context
-from rclpy.serialization import serialize_message
-from sensor_msgs.msg import BatteryState
 
-from battery_predictor.conventions import internal_current_to_battery_state
-from battery_predictor.nodes.messages import ns_to_stamp, route_section_msgs
+from battery_predictor.nodes.messages import route_section_msgs
 from battery_predictor.nodes.replay_session import ReplaySession
 from battery_predictor.profiles.ranger import longest_route
-from battery_predictor.replay import BagMessage, stream_from_messages
+from battery_predictor.replay import stream_from_messages
+
+from ._helpers import T0_NS, S
+from ._helpers import battery_state_samples as samples
 
 pytestmark = pytest.mark.ros
 
 REPO = Path(__file__).resolve().parents[2]
-T0_NS = 1_704_067_200 * 10**9
-S = 10**9
 
 
-def samples(start_s: float, end_s: float, voltage_v: float, current_a: float) -> list[BagMessage]:
-    out = []
-    for k in range(round(end_s - start_s)):
-        t_ns = T0_NS + round((start_s + k) * S)
-        msg = BatteryState(voltage=voltage_v, current=float(internal_current_to_battery_state(current_a)),
-                           temperature=25.0, present=True)
-        msg.header.stamp = ns_to_stamp(t_ns)
-        out.append(BagMessage(t_ns, "/battery_state", "sensor_msgs/msg/BatteryState", serialize_message(msg)))
-    return out
 
 
 def test_route_rejected_once_the_measured_pack_is_low(ros_context: Context) -> None:
