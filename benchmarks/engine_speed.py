@@ -17,8 +17,13 @@ the wall time of one simulation with
 and the engine's agreement on the full day with PyBaMM's IDAKLU at rtol = atol = 1e-10 (RMS pack
 voltage, time to cut-off) and with liionpack.
 
+Thermal rows (the Temi day, same run): the lumped thermal cell (``{"thermal": "lumped"}``) next to
+the isothermal one through the simulator interface and as cell runs (compiled and NumPy
+recurrence, 1 / 100 / 1000 parameter sets), and its agreement with PyBaMM's own lumped SPM at
+1e-10 (pack voltage, cell temperature, time to cut-off).
+
 Usage: nice .venv/bin/python benchmarks/engine_speed.py [--repeat 5] [--skip-liionpack]
-       [--skip-reference] [--numpy-sets 100]
+       [--skip-reference] [--numpy-sets 100] [--thermal-only]
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +53,8 @@ from battery_predictor.simulation.engine.model import extract_linear_spm  # noqa
 from battery_predictor.simulation.engine.pack import pack_voltage_v  # noqa: E402
 from battery_predictor.simulation.engine.run import ParameterSets, run_cells  # noqa: E402
 from battery_predictor.simulation.engine.segments import EnginePack  # noqa: E402
-from battery_predictor.simulation.engine.simulator import EngineSimulator  # noqa: E402
+from battery_predictor.simulation.engine.simulator import DIFFUSIVITY_KEYS, EngineSimulator  # noqa: E402
+from battery_predictor.simulation.engine.thermal import diffusivity_temperature  # noqa: E402
 from battery_predictor.simulation.fast import FastPackSimulator  # noqa: E402
 
 STEP_S = 5.0
@@ -244,6 +251,72 @@ def bench_day(name: str, params, request: SimulationRequest, args) -> None:
         print(f"    IDAKLU 1e-10 solve: {reference_comparison(params, request, eng_result)}")
 
 
+def thermal_rows(name: str, params, request: SimulationRequest, args) -> None:
+    """The lumped thermal cell next to the isothermal one on the same day (see module docstring)."""
+    thermal = replace(params, options={**params.options, "thermal": "lumped"})
+    load = request.load
+    print(f"\n{name}, lumped thermal vs isothermal (same run, {load.start_s.size} steps of {STEP_S:g} s):")
+    results = {}
+    for label, p in (("isothermal", params), ("lumped thermal", thermal)):
+        engine = EngineSimulator(fallback=None)
+        engine.simulate(p, request)
+        own_s = []
+
+        def call(engine=engine, p=p, own_s=own_s):
+            result = engine.simulate(p, request)
+            own_s.append(result.extra["engine_seconds"])
+            return result
+
+        seconds, results[label] = best_of(call, args.repeat)
+        row(f"engine simulator, {label}, repeat", seconds,
+            f"engine's own {min(own_s) * 1e3:.2f} ms ({results[label].extra['engine_backend']})")
+    duration_s = np.diff(load.edges_s())
+    current_a = load.current_a / params.parallel
+    rng = np.random.default_rng(0)
+    for label, p in (("isothermal", params), ("lumped thermal", thermal)):
+        model = extract_linear_spm(p)
+        modal = modal_system(model)
+        pv = prepared_parameter_values(p)
+        c_n0, c_p0 = initial_concentrations(p, pv, initial_soc=request.initial_soc, initial_cell_ocv_v=None)
+        table = diffusivity_temperature(pv, DIFFUSIVITY_KEYS, p.ambient_temperature_k)
+        for n_sets, backend in ((0, "auto"), (0, "numpy"), (100, "auto"), (1000, "auto")):
+            sets = None if n_sets == 0 else ParameterSets(**{k: rng.uniform(0.8, 1.2, n_sets) for k in SET_KEYS})
+
+            def fn(model=model, modal=modal, sets=sets, backend=backend, c_n0=c_n0, c_p0=c_p0, table=table,
+                   temperature_k=p.ambient_temperature_k):
+                return run_cells(model, modal, duration_s, current_a, c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
+                                 temperature_k=temperature_k, sets=sets, backend=backend,
+                                 diffusivity_temperature=table)
+
+            fn()
+            seconds, runs = best_of(fn, args.repeat if n_sets < 1000 else max(1, args.repeat // 2))
+            note = f"{runs.extra['backend']}, {runs.reached_cutoff.sum()}/{runs.reached_cutoff.size} reach the cut-off"
+            if n_sets > 1:
+                note += f", {seconds / n_sets * 1e3:.3f} ms per set"
+            row(f"engine run, {label}, {max(n_sets, 1)} set{'s' if n_sets > 1 else ''}, {backend}", seconds, note)
+    eng = results["lumped thermal"]
+    temps = eng.extra["cell_temperature_k"]
+    print(f"  lumped cell: temperature rise {temps.max() - temps[0]:.2f} K; isothermal vs lumped end "
+          f"{results['isothermal'].end_time_s:.1f} s vs {eng.end_time_s:.1f} s")
+    if args.skip_reference:
+        return
+    ref = FastPackSimulator(rtol=1e-10, atol=1e-10)
+    tic = time.perf_counter()
+    res = ref.simulate(thermal, request)
+    seconds = time.perf_counter() - tic
+    t = eng.time_s[eng.time_s <= res.end_time_s]
+    sol = res.extra["solution"]
+    v_ref = pack_voltage_v(np.asarray(sol["Terminal voltage [V]"](t), dtype=float), load.current_at(t),
+                           series=params.series, r_eq_ohm=res.extra["r_eq_ohm"])
+    t_ref = np.asarray(sol["Volume-averaged cell temperature [K]"](t), dtype=float)
+    d_v = eng.pack_voltage_v[: t.size] - v_ref
+    d_t = temps[: t.size] - t_ref
+    dt_pct = abs(eng.end_time_s - res.end_time_s) / res.end_time_s * 100.0
+    print(f"    IDAKLU 1e-10 lumped solve: {seconds:8.2f} s   engine vs PyBaMM lumped: RMS {np.sqrt(np.mean(d_v ** 2)) * 1e3:.4f}"
+          f" mV, temperature RMS {np.sqrt(np.mean(d_t ** 2)):.2e} K (max {np.abs(d_t).max():.2e} K), end "
+          f"{eng.end_time_s:.2f} s vs {res.end_time_s:.2f} s ({dt_pct:.5f} %)")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5, help="repetitions of each timed row (best is printed)")
@@ -251,12 +324,15 @@ def main() -> int:
     ap.add_argument("--skip-reference", action="store_true", help="leave out the IDAKLU 1e-10 agreement")
     ap.add_argument("--numpy-sets", type=int, default=100, help="sets of the batched NumPy row")
     ap.add_argument("--fit-calls", type=int, default=1000, help="simulations of the fit-like row (0: none)")
+    ap.add_argument("--thermal-only", action="store_true", help="only the thermal rows (Temi day)")
     args = ap.parse_args()
     import os
 
     print(f"engine_speed: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} at start")
-    for name, params, request in (temi_day(), ranger_day()):
-        bench_day(name, params, request, args)
+    if not args.thermal_only:
+        for name, params, request in (temi_day(), ranger_day()):
+            bench_day(name, params, request, args)
+    thermal_rows(*temi_day(), args)
     return 0
 
 

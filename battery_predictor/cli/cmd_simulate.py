@@ -15,6 +15,9 @@ def register(sub) -> None:
     p.add_argument("--simulator", choices=SIMULATORS, default=SIMULATORS[0],
                    help="engine (default: PyBaMM's SPM stepped exactly, milliseconds per day; hands what it does not "
                         "cover to fast and says so), fast (PyBaMM's solver) or liionpack (reference)")
+    p.add_argument("--thermal", choices=("params", "isothermal", "lumped"), default="params",
+                   help="cell thermal model: as the params say (default; cell.options thermal), isothermal at the "
+                        "data's temperature, or lumped (PyBaMM's lumped thermal cell self-heating from it)")
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto",
                    help="initial state: params' concentrations or first measured voltage (default auto)")
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
@@ -34,7 +37,9 @@ def run(args) -> int:
     if args.plot:
         check_plot_file(args.plot)
     tic = time.perf_counter()
-    params = load_params(args.params)
+    from battery_predictor.simulation.cell_setup import is_lumped_thermal, with_thermal
+
+    params = with_thermal(load_params(args.params), args.thermal)
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
     sim = simulator_named(args.simulator)
     rows, results = [], []
@@ -64,6 +69,7 @@ def run(args) -> int:
     out.pop("data", None)
     out["seconds"] = time.perf_counter() - tic
     out["simulator"] = args.simulator
+    out["thermal"] = "lumped" if is_lumped_thermal(params) else "isothermal"
     if args.plot:
         from battery_predictor.plots import plot_voltage_fit
 
@@ -76,7 +82,7 @@ def run(args) -> int:
         print(f"{r['data']}: R2_mod {r['r2_mod']:.4f}, RMSE {r['rmse_mV']:.1f} mV, runtime measured "
               f"{r['runtime_s_measured'] / 60:.1f} min, simulated "
               f"{'n/a' if ts is None else f'{ts / 60:.1f} min'}")
-    print(f"({args.simulator} simulator, {out['seconds']:.1f} s)")
+    print(f"({args.simulator} simulator, {out['thermal']} cell, {out['seconds']:.1f} s)")
     if args.plot:
         print(f"wrote {out['plot']}")
     return 0

@@ -63,8 +63,19 @@ def request_for_recording(params: PackParams, rec: Recording, *, initial_state: 
     if extend_s > 0:
         dt = float(np.median(np.diff(out_t)))
         out_t = np.concatenate([out_t, np.arange(out_t[-1] + dt, load.end_s, dt)])
-    return SimulationRequest(load=load, ambient_temperature_k=rec.mean_temperature_k(params.ambient_temperature_k),
+    return SimulationRequest(load=load, ambient_temperature_k=recording_temperature_k(params, rec),
                              initial_pack_ocv_v=ocv, output_time_s=out_t)
+
+
+def recording_temperature_k(params: PackParams, rec: Recording) -> float:
+    """The temperature (K) a recording is simulated at: its mean measured temperature for an isothermal cell; for
+    a lumped thermal cell (which heats itself from the ambient) its first measured temperature (the cell at rest
+    before the load, as the ambient); the params' ambient temperature when none is measured."""
+    from battery_predictor.simulation.cell_setup import is_lumped_thermal
+
+    if is_lumped_thermal(params) and rec.temperature_k is not None and np.isfinite(rec.temperature_k).any():
+        return float(rec.temperature_k[np.isfinite(rec.temperature_k)][0])
+    return rec.mean_temperature_k(params.ambient_temperature_k)
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,10 @@ same segments and inputs; the pack voltage is ``(series - 1) * V_normal + V_weak
 and the run ends when either group reaches its lower cut-off. Both groups start from the same
 SOC (same stoichiometries; the weak group only holds less charge), so the pack's usable capacity
 and its SOC are those of the group that empties first.
+
+With the PyBaMM option ``{"thermal": "lumped"}`` the cells self-heat from the run's (ambient)
+temperature, a continued run carries their temperature in its solution, and the series
+resistance's Arrhenius factor follows the cell temperature at every sample.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from functools import cached_property
 import numpy as np
 
 from battery_predictor.errors import SimulationError
-from battery_predictor.simulation.cell_setup import build_model, prepared_parameter_values, quiet_pybamm
+from battery_predictor.simulation.cell_setup import build_model, model_options, prepared_parameter_values, quiet_pybamm
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 _CURRENT = "Current function [A]"
@@ -35,6 +39,8 @@ _C_N0 = "Initial concentration in negative electrode [mol.m-3]"
 _C_P0 = "Initial concentration in positive electrode [mol.m-3]"
 _T_AMB = "Ambient temperature [K]"
 _T_INIT = "Initial temperature [K]"
+#: The lumped thermal model's cell temperature (option ``{"thermal": "lumped"}``).
+_T_CELL = "Volume-averaged cell temperature [K]"
 #: Shortest step (s) taken to bring a group to the other group's cut-off time.
 _MIN_STEP_S = 1e-6
 
@@ -253,6 +259,7 @@ class PackRunner:
             sol, sol_w, soc_start, charge0 = None, None, soc, 0.0
         series = self.params.series
         r_factor = float(series_resistance_factor(self.params, temperature_k))
+        thermal = model_options(self.params).get("thermal", "isothermal") == "lumped"
         times, volts, amps, ends = [], [], [], []
         t0, cutoff, charge_as = 0.0, False, 0.0
         with self._lock, quiet_pybamm():
@@ -267,6 +274,7 @@ class PackRunner:
                 new_w = None
                 try:
                     new, t_seg, v_cell = _step(self._sim, sol, duration_s, inputs, t_interp)
+                    t_cell = np.asarray(new[_T_CELL].entries, dtype=float).ravel() if thermal else None
                     stopped = _stopped_early(new, t_seg, duration_s)
                     if weak_sim is not None:
                         new_w, t_w, v_w = _step(weak_sim, sol_w, duration_s, inputs, t_interp)
@@ -284,6 +292,8 @@ class PackRunner:
                 else:  # extension cell_imbalance: the group that reached its cut-off first ends the segment
                     if t_w[-1] < t_seg[-1]:
                         v_cell = np.interp(t_w, t_seg, v_cell)
+                        if t_cell is not None:
+                            t_cell = np.interp(t_w, t_seg, t_cell)
                         t_seg = t_w
                         new = self._truncated(self._sim, sol, new, float(t_w[-1]), inputs)
                     else:
@@ -292,7 +302,9 @@ class PackRunner:
                             new_w = self._truncated(weak_sim, sol_w, new_w, float(t_seg[-1]), inputs)
                     v_pack = (series - 1) * v_cell + v_w
                 times.append(t0 + t_seg)
-                volts.append(v_pack - (current_a - self.current_offset_a) * self.r_eq_ohm * r_factor)
+                # a lumped thermal cell: the series resistance's Arrhenius factor at the cell temperature
+                factor = r_factor if t_cell is None else series_resistance_factor(self.params, t_cell)
+                volts.append(v_pack - (current_a - self.current_offset_a) * self.r_eq_ohm * factor)
                 amps.append(np.full(t_seg.size, current_a))
                 ends.append(sum(len(x) for x in times) - 1)
                 t0 += float(t_seg[-1])

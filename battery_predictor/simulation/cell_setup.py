@@ -104,12 +104,56 @@ def build_model(params, *, for_liionpack: bool = False):
 
 
 def prepared_parameter_values(params):
-    """Parameter values ready to simulate a discharge (upper cut-off event relaxed)."""
-    from battery_predictor.diagnosis.extensions_impl import apply_extension_parameter_values
+    """Parameter values ready to simulate a discharge (upper cut-off event relaxed).
+
+    A lumped thermal cell (:func:`is_lumped_thermal`) whose base set lacks thermal values (Prada2013)
+    gets those of the extension ``temperature`` (Chen2020's, the cooling surface of a cylinder of the
+    cell volume; :data:`~battery_predictor.diagnosis.extensions_impl.THERMAL_DEFAULTS`).
+    """
+    from battery_predictor.diagnosis.extensions_impl import (
+        THERMAL_DEFAULTS,
+        _cooling_area_m2,
+        apply_extension_parameter_values,
+    )
 
     pv = apply_extension_parameter_values(params, params.parameter_values())
     pv["Upper voltage cut-off [V]"] = max(float(pv["Upper voltage cut-off [V]"]), RELAXED_UPPER_CUTOFF_V)
+    if is_lumped_thermal(params):
+        keys = set(pv.keys())
+        missing = {k: v for k, v in THERMAL_DEFAULTS.items() if k not in keys}
+        if "Cell cooling surface area [m2]" not in keys and "Cell volume [m3]" in keys:
+            missing["Cell cooling surface area [m2]"] = _cooling_area_m2(float(pv["Cell volume [m3]"]))
+        if missing:
+            pv.update(missing, check_already_exists=False)
     return pv
+
+
+#: Values of the ``--thermal`` option of ``simulate`` and ``fit``.
+THERMAL_MODES = ("params", "isothermal", "lumped")
+
+
+def is_lumped_thermal(params) -> bool:
+    """True when ``params`` ask PyBaMM's lumped thermal model (``cell.options: {thermal: lumped}``)."""
+    return model_options(params).get("thermal", "isothermal") == "lumped"
+
+
+def with_thermal(params, mode: str):
+    """``params`` with the cell's thermal model set by a command line's ``--thermal``.
+
+    ``"params"`` keeps the params' own (``cell.options``; isothermal unless they say
+    ``thermal: lumped``), ``"lumped"`` sets PyBaMM's ``{"thermal": "lumped"}``, ``"isothermal"``
+    removes it.
+    """
+    from dataclasses import replace
+
+    if mode not in THERMAL_MODES:
+        raise SimulationError(f"thermal model {mode!r} is not one of {', '.join(THERMAL_MODES)}")
+    if mode == "params":
+        return params
+    options = {k: v for k, v in params.options.items() if k != "thermal"}
+    if mode == "lumped":
+        options["thermal"] = "lumped"
+    return replace(params, options=options)
 
 
 def initial_concentrations(params, pv, *, initial_soc: float | None, initial_cell_ocv_v: float | None):

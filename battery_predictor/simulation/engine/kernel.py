@@ -16,7 +16,7 @@ import weakref
 
 import numpy as np
 
-from battery_predictor.simulation.engine.model import CURRENT, VOLTAGE_ROWS, LinearSpm
+from battery_predictor.simulation.engine.model import CURRENT, THERMAL_ROWS, VOLTAGE_ROWS, LinearSpm
 
 #: NumPy functions of the printed voltage expression and their scalar replacements.
 _SCALAR_FUNCTIONS = {
@@ -28,25 +28,30 @@ _ROW = re.compile(r"y\[(\d+):(\d+)\]")
 _NP_CALL = re.compile(r"np\.\w+")
 _NAME = re.compile(r"\b(?:var_m?\d+|y\d+)\b")
 #: Compiled kernels by (printed voltage source, parallel).
-_CACHE: dict[tuple[str, bool], object] = {}
+_CACHE: dict[tuple, object] = {}
 #: Printed voltage source by model (printing takes milliseconds).
 _SOURCES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: Printed heat-equation source by model (thermal cells).
+_RATE_SOURCES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 #: Batches of at least this many sets run in the parallel kernel.
 PARALLEL_MIN_SETS = 64
 
 
-def scalar_voltage_source(model: LinearSpm) -> str | None:
-    """Source of ``cell_voltage(y0, ..., y6)`` (scalar) from PyBaMM's printer, or None when unsupported."""
+def _scalar_lines(symbol, n_rows: int) -> tuple[list[str], str] | None:
+    """PyBaMM's printed NumPy statements of ``symbol`` as scalar statements on ``y0 .. y{n_rows-1}``.
+
+    Returns (statements, name of the result), or None when the expression has no scalar form.
+    """
     import pybamm
 
-    constants, body = pybamm.to_python(model.voltage_symbol, debug=False)
+    constants, body = pybamm.to_python(symbol, debug=False)
     if constants:
         return None
     for call in set(_NP_CALL.findall(body)):
         if call not in _SCALAR_FUNCTIONS:
             return None
     for a, b in _ROW.findall(body):
-        if int(b) != int(a) + 1 or int(a) >= len(VOLTAGE_ROWS):
+        if int(b) != int(a) + 1 or int(a) >= n_rows:
             return None
     body = _ROW.sub(lambda m: f"y{m.group(1)}", body)
     for call, scalar in _SCALAR_FUNCTIONS.items():
@@ -54,10 +59,30 @@ def scalar_voltage_source(model: LinearSpm) -> str | None:
     if "[" in body or "@" in body:
         return None
     lines = [line for line in body.splitlines() if line.strip()]
-    result = lines[-1].split("=", 1)[0].strip()
+    return lines, lines[-1].split("=", 1)[0].strip()
+
+
+def scalar_voltage_source(model: LinearSpm) -> str | None:
+    """Source of ``cell_voltage(y0, ..., y6)`` (scalar) from PyBaMM's printer, or None when unsupported."""
+    printed = _scalar_lines(model.voltage_symbol, len(VOLTAGE_ROWS))
+    if printed is None:
+        return None
+    lines, result = printed
     args = ", ".join(f"y{k}" for k in range(len(VOLTAGE_ROWS)))
     single = f"def cell_voltage({args}):\n    " + "\n    ".join(lines) + f"\n    return {result}\n"
     return single + "\n\n" + _pair_source(lines, result)
+
+
+def scalar_rate_source(model: LinearSpm) -> str | None:
+    """Source of ``cell_rate(y0, ..., y7)``: the lumped heat equation's ``dT/dt`` (K/s), or None."""
+    if model.thermal is None:
+        return None
+    printed = _scalar_lines(model.thermal.rate_symbol, len(THERMAL_ROWS))
+    if printed is None:
+        return None
+    lines, result = printed
+    args = ", ".join(f"y{k}" for k in range(len(THERMAL_ROWS)))
+    return f"def cell_rate({args}):\n    " + "\n    ".join(lines) + f"\n    return {result}\n"
 
 
 def _pair_source(lines: list[str], result: str) -> str:
@@ -110,6 +135,30 @@ def fused_kernel(model: LinearSpm, *, parallel: bool = False):
     if key not in _CACHE:
         _CACHE[key] = _compile(numba, source, bool(parallel))
     return _CACHE[key]
+
+
+def thermal_kernel(model: LinearSpm, *, parallel: bool = False):
+    """The compiled thermal recurrence for ``model``'s heat equation, or None (no Numba, or no scalar form)."""
+    try:
+        import numba
+    except ImportError:
+        return None
+    if model not in _RATE_SOURCES:
+        _RATE_SOURCES[model] = scalar_rate_source(model) or ""
+    source = _RATE_SOURCES[model]
+    if not source:
+        return None
+    key = ("thermal", source, bool(parallel))
+    if key not in _CACHE:
+        from battery_predictor.simulation.engine.thermal import compile_thermal_kernel
+
+        _CACHE[key] = compile_thermal_kernel(numba, source, bool(parallel))
+    return _CACHE[key]
+
+
+def forget_thermal_kernel(model: LinearSpm) -> None:
+    """Use no compiled thermal recurrence for ``model`` from now on."""
+    _RATE_SOURCES[model] = ""
 
 
 def forget_kernel(model: LinearSpm) -> None:

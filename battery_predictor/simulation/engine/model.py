@@ -52,8 +52,15 @@ C_MAX_N = "Maximum concentration in negative electrode [mol.m-3]"
 C_MAX_P = "Maximum concentration in positive electrode [mol.m-3]"
 #: PyBaMM keys that become ``[input]`` parameters of the extracted model.
 INPUT_KEYS = (CURRENT, C_N0, C_P0, T_AMB, T_INIT, EPS_N, EPS_P, HEIGHT)
-#: Rows of the voltage function's input array, in order.
+#: Rows of the voltage function's input array, in order. The temperature row is the cell's
+#: temperature: the ambient one of an isothermal cell, the lumped temperature state of a thermal one.
 VOLTAGE_ROWS = ("surface_n", "surface_p", CURRENT, T_AMB, EPS_N, EPS_P, HEIGHT)
+#: Row of the ambient temperature in the lumped heat equation's input array (after the voltage rows).
+AMBIENT_ROW = "ambient temperature"
+#: Rows of the heat equation's input array: the voltage rows (row 3 the cell temperature) and the ambient.
+THERMAL_ROWS = VOLTAGE_ROWS + (AMBIENT_ROW,)
+#: PyBaMM's lumped temperature state.
+_TEMPERATURE_VARIABLE = "Volume-averaged cell temperature [K]"
 _PARTICLE_VARIABLES = {
     "negative": "X-averaged negative particle concentration [mol.m-3]",
     "positive": "X-averaged positive particle concentration [mol.m-3]",
@@ -96,6 +103,51 @@ class ParticleBlock:
     scale_mol_m3: float
 
 
+def _evaluate_rows(evaluator, rows) -> np.ndarray:
+    """An expression on stacked input rows, elementwise over the rows broadcast together."""
+    shape = np.broadcast_shapes(*(np.shape(row) for row in rows))
+    size = int(np.prod(shape)) if shape else 1
+    aux = np.empty((len(rows), size))
+    for k, row in enumerate(rows):
+        aux[k] = np.broadcast_to(np.asarray(row, dtype=float), shape).ravel()
+    out = np.empty(size)
+    for first in range(0, size, _VOLTAGE_CHUNK):  # chunks keep the temporaries in cache
+        cols = slice(first, min(first + _VOLTAGE_CHUNK, size))
+        out[cols] = np.asarray(evaluator(0.0, aux[:, cols]), dtype=float).ravel()
+    return out.reshape(shape)
+
+
+@dataclass(frozen=True, eq=False)
+class LumpedThermal:
+    """PyBaMM's lumped heat equation of the cell, ``dT/dt = (Q - h A (T - T_amb)) / (rho c_p V)``.
+
+    The right-hand side is PyBaMM's own discretised expression (option ``{"thermal": "lumped"}``:
+    Ohmic, irreversible reaction and reversible entropic heat, contact-resistance heat when that
+    option is on, Newton cooling through the cell's cooling surface, the volume-averaged effective
+    heat capacity), rewritten like the voltage so that it depends on rows of :data:`THERMAL_ROWS`.
+
+    Attributes
+    ----------
+    rate_symbol : object
+        PyBaMM expression of ``dT/dt`` (K/s) whose ``y`` is the input array of :data:`THERMAL_ROWS`.
+    """
+
+    rate_symbol: object
+
+    def temperature_rate_k_s(self, surface_n, surface_p, current_a, temperature_k, ambient_temperature_k,
+                             eps_n, eps_p, height_m) -> np.ndarray:
+        """``dT/dt`` in K/s, elementwise over broadcast arguments (surface stoichiometries, cell current in A,
+        cell and ambient temperature in K, the voltage's volume fractions and electrode height in m)."""
+        rows = (surface_n, surface_p, current_a, temperature_k, eps_n, eps_p, height_m, ambient_temperature_k)
+        return _evaluate_rows(self._evaluator, rows)
+
+    @functools.cached_property
+    def _evaluator(self):
+        import pybamm
+
+        return pybamm.EvaluatorPython(self.rate_symbol)
+
+
 @dataclass(frozen=True, eq=False)
 class LinearSpm:
     """PyBaMM's discretised SPM of one cell split into linear blocks and a voltage function.
@@ -112,12 +164,16 @@ class LinearSpm:
         diffusivities (m2/s), thicknesses (m).
     lower_cutoff_v : float
         Lower voltage cut-off of the cell (V).
+    thermal : LumpedThermal or None
+        PyBaMM's lumped heat equation when the model has the option ``{"thermal": "lumped"}``;
+        None for an isothermal cell.
     """
 
     blocks: tuple[ParticleBlock, ParticleBlock]
     voltage_symbol: object
     built_values: dict
     lower_cutoff_v: float
+    thermal: LumpedThermal | None = None
 
     def cell_voltage_v(self, surface_n: np.ndarray, surface_p: np.ndarray, current_a: np.ndarray,
                        temperature_k, eps_n=None, eps_p=None, height_m=None) -> np.ndarray:
@@ -127,21 +183,11 @@ class LinearSpm:
         maximum). The optional values default to the built cell's and broadcast against the
         surface arrays.
         """
-        surface_n = np.asarray(surface_n, dtype=float)
-        shape = np.broadcast_shapes(surface_n.shape, np.shape(surface_p), np.shape(current_a))
         b = self.built_values
         rows = (surface_n, surface_p, current_a, temperature_k,
                 b[EPS_N] if eps_n is None else eps_n, b[EPS_P] if eps_p is None else eps_p,
                 b[HEIGHT] if height_m is None else height_m)
-        size = int(np.prod(shape)) if shape else 1
-        aux = np.empty((len(rows), size))
-        for k, row in enumerate(rows):
-            aux[k] = np.broadcast_to(np.asarray(row, dtype=float), shape).ravel()
-        out = np.empty(size)
-        for first in range(0, size, _VOLTAGE_CHUNK):  # chunks keep the temporaries in cache
-            cols = slice(first, min(first + _VOLTAGE_CHUNK, size))
-            out[cols] = np.asarray(self._evaluator(0.0, aux[:, cols]), dtype=float).ravel()
-        return out.reshape(shape)
+        return _evaluate_rows(self._evaluator, rows)
 
     @functools.cached_property
     def _evaluator(self):
@@ -251,13 +297,59 @@ def _replace(symbol, rule):
     return symbol.create_copy(new_children=children)
 
 
-def _voltage_symbol(model, slices: dict[str, slice]):
-    """PyBaMM's discretised voltage with surface values and inputs as rows of :data:`VOLTAGE_ROWS`."""
+@dataclass(frozen=True)
+class _TemperatureState:
+    """Where PyBaMM keeps the lumped temperature: ``T = reference + scale * y[start]``."""
+
+    start: int
+    scale_k: float
+    reference_k: float
+
+
+def _temperature_state(model) -> _TemperatureState | None:
+    for var, sl in model.y_slices.items():
+        if var.name == _TEMPERATURE_VARIABLE:
+            if sl[0].stop - sl[0].start != 1:
+                raise SimulationError("the lumped temperature is not a single state")
+            scale = float(var.scale.evaluate()) if hasattr(var.scale, "evaluate") else float(var.scale)
+            ref = float(var.reference.evaluate()) if hasattr(var.reference, "evaluate") else float(var.reference)
+            return _TemperatureState(sl[0].start, scale, ref)
+    return None
+
+
+def _temperature_as(symbol, temperature: _TemperatureState | None, value):
+    """``symbol`` with PyBaMM's temperature state replaced by its scaled form of ``value`` (a symbol in K)."""
     import pybamm
 
-    rows = {name: pybamm.StateVector(slice(k, k + 1)) for k, name in enumerate(VOLTAGE_ROWS)}
+    if temperature is None:
+        return symbol
+
+    def rule(sym):
+        if isinstance(sym, pybamm.StateVector) and sym.y_slices[0].start == temperature.start:
+            scaled = (value - pybamm.Scalar(temperature.reference_k)) / pybamm.Scalar(temperature.scale_k)
+            return pybamm.Vector(np.ones(1)) * scaled  # a column like the state it replaces
+        return None
+
+    return _replace(symbol, rule)
+
+
+def _rows_symbol(expression, slices: dict[str, slice], rows_names: tuple[str, ...],
+                 temperature: _TemperatureState | None, ambient_row: str | None):
+    """A discretised expression with surface values, inputs and the temperature as rows of ``rows_names``.
+
+    The temperature state (a thermal model) becomes the row ``T_AMB`` (the cell temperature);
+    the input ``T_AMB`` becomes ``ambient_row`` when given, else the same row.
+    """
+    import pybamm
+
+    rows = {name: pybamm.StateVector(slice(k, k + 1)) for k, name in enumerate(rows_names)}
     by_start = {sl.start: electrode for electrode, sl in slices.items()}
     surface_rows: dict[str, np.ndarray] = {}
+    inputs = dict(zip(rows_names, rows_names))
+    if ambient_row is not None:
+        inputs[T_AMB] = ambient_row
+    elif temperature is not None:
+        inputs.pop(T_AMB)  # the cell temperature is the state: the ambient must not enter
 
     def rule(sym):
         if isinstance(sym, pybamm.MatrixMultiplication) and isinstance(sym.right, pybamm.StateVector):
@@ -277,15 +369,34 @@ def _voltage_symbol(model, slices: dict[str, slice]):
             placeholder = rows[f"surface_{electrode[0]}"]
             return placeholder if factor == 1.0 else pybamm.Scalar(factor) * placeholder
         if isinstance(sym, pybamm.StateVector):
+            if temperature is not None and sym.y_slices[0].start == temperature.start and sym.shape == (1, 1):
+                return (rows[T_AMB] - pybamm.Scalar(temperature.reference_k)) / pybamm.Scalar(temperature.scale_k)
             raise SimulationError("the voltage depends on the state other than through surface values")
         if isinstance(sym, pybamm.InputParameter):
-            if sym.name not in rows:
-                raise SimulationError(f"the voltage depends on the input '{sym.name}'")
-            return rows[sym.name]
+            if sym.name not in inputs:
+                raise SimulationError(f"the expression depends on the input '{sym.name}'")
+            return rows[inputs[sym.name]]
         return None
 
-    voltage = _replace(model.variables["Voltage [V]"], rule)
-    return voltage, surface_rows
+    return _replace(expression, rule), surface_rows
+
+
+def _voltage_symbol(model, slices: dict[str, slice], temperature: _TemperatureState | None = None):
+    """PyBaMM's discretised voltage with surface values and inputs as rows of :data:`VOLTAGE_ROWS`."""
+    return _rows_symbol(model.variables["Voltage [V]"], slices, VOLTAGE_ROWS, temperature, None)
+
+
+def _lumped_thermal(model, slices: dict[str, slice], temperature: _TemperatureState,
+                    voltage_rows: dict[str, np.ndarray]) -> LumpedThermal:
+    """PyBaMM's lumped heat equation as ``dT/dt`` (K/s) on the rows of :data:`THERMAL_ROWS`."""
+    import pybamm
+
+    var = next(v for v in model.rhs if v.name == _TEMPERATURE_VARIABLE)
+    rate, surface_rows = _rows_symbol(model.rhs[var], slices, THERMAL_ROWS, temperature, AMBIENT_ROW)
+    for electrode, row in surface_rows.items():
+        if not np.allclose(row, voltage_rows[electrode], rtol=1e-13, atol=0):
+            raise SimulationError(f"the heat equation uses another {electrode} surface row than the voltage")
+    return LumpedThermal(rate_symbol=pybamm.Scalar(temperature.scale_k) * rate)
 
 
 def extract_linear_spm(params) -> LinearSpm:
@@ -300,17 +411,26 @@ def extract_linear_spm(params) -> LinearSpm:
         When the model is not an SPM whose particle equations are linear with constant
         coefficients and whose voltage depends on the state through the two surface values only.
     """
+    import pybamm
+
     model, built, cutoff = _built_simulation(params)
     slices = _block_slices(model)
+    temperature = _temperature_state(model)
+    if temperature is None and "thermal" in model.options and model.options["thermal"] != "isothermal":
+        raise SimulationError(f"the engine covers isothermal and lumped thermal cells, not "
+                              f"'{model.options['thermal']}'")
     n_states = model.concatenated_rhs.shape[0]
     inputs = {key: built[key] for key in INPUT_KEYS}
-    voltage, surface_rows = _voltage_symbol(model, slices)
+    voltage, surface_rows = _voltage_symbol(model, slices, temperature)
     if set(surface_rows) != set(slices):
         raise SimulationError("the voltage does not depend on both surface values")
+    # particle equations of a thermal cell at the built temperature (its diffusivities' own
+    # temperature dependence is a factor on the eigenvalues, see engine.thermal)
+    cell_temperature = pybamm.InputParameter(T_AMB)
     blocks = []
     for electrode, sl in slices.items():
         var = next(v for v in model.y_slices if v.name == _PARTICLE_VARIABLES[electrode])
-        jac, unit = _linear_map(model.rhs[var], n_states, inputs)
+        jac, unit = _linear_map(_temperature_as(model.rhs[var], temperature, cell_temperature), n_states, inputs)
         outside = np.delete(jac, np.arange(sl.start, sl.stop), axis=1)
         if np.abs(outside).max(initial=0.0) > 0.0:
             raise SimulationError(f"the {electrode} particle is coupled to other states")
@@ -319,8 +439,9 @@ def extract_linear_spm(params) -> LinearSpm:
         _check_surface(model.variables[_SURFACE_VARIABLES[electrode]], sl, row * scale, n_states, inputs, electrode)
         blocks.append(ParticleBlock(electrode=electrode, state_slice=sl, a_matrix_per_s=jac[:, sl],
                                     b_vector_per_a_s=unit, surface_row=row, scale_mol_m3=scale))
+    thermal = None if temperature is None else _lumped_thermal(model, slices, temperature, surface_rows)
     return LinearSpm(blocks=(blocks[0], blocks[1]), voltage_symbol=voltage, built_values=built,
-                     lower_cutoff_v=cutoff)
+                     lower_cutoff_v=cutoff, thermal=thermal)
 
 
 def _check_surface(surface, sl: slice, row_mol_m3: np.ndarray, n_states: int, inputs: dict, electrode: str) -> None:

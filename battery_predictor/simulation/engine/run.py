@@ -34,6 +34,13 @@ from battery_predictor.simulation.engine.model import (
     HEIGHT,
     LinearSpm,
 )
+from battery_predictor.simulation.engine.thermal import (
+    TABLE_RANGE_K,
+    DiffusivityTemperature,
+    ThermalTrace,
+    split_steps,
+    thermal_recurrence,
+)
 
 LOG = logging.getLogger(__name__)
 #: Cut-off times are located to this accuracy (s).
@@ -48,7 +55,9 @@ _MAX_ROOT_ITERATIONS = 100
 class ParameterSets:
     """Cells that differ from the built cell by factors on geometric and transport values.
 
-    Every attribute is a factor (1 = the built value), a float or an array of shape (n_sets,).
+    Every attribute is a factor (1 = the built value), a float or an array of shape (n_sets,);
+    ``heat_rate`` (lumped thermal cells) is the factor on ``dT/dt``, the built cell's volume-averaged
+    heat capacity over the set's (:class:`~battery_predictor.simulation.engine.thermal.HeatCapacity`).
     None of them needs a PyBaMM rebuild (see :mod:`battery_predictor.simulation.engine.model`); the
     maximum concentrations only where :func:`~battery_predictor.simulation.engine.model.c_max_scaling_holds`.
     """
@@ -64,6 +73,7 @@ class ParameterSets:
     height: object = 1.0
     c_max_n: object = 1.0
     c_max_p: object = 1.0
+    heat_rate: object = 1.0
 
     def size(self) -> int:
         """Number of sets (1 when every factor is a scalar)."""
@@ -127,6 +137,7 @@ class _Batch:
     eps_p: np.ndarray
     height_m: np.ndarray
     temperature_k: np.ndarray
+    heat_rate: np.ndarray | None = None
 
 
 def _batch(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: int, temperature_k) -> _Batch:
@@ -143,19 +154,24 @@ def _batch(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: in
         eps_p=built[EPS_P] * f["fraction_p"] * f["thickness_p"] * f["c_max_p"] / f["radius_p"],
         height_m=built[HEIGHT] * f["height"],
         temperature_k=np.broadcast_to(np.asarray(temperature_k, dtype=float), (n_sets,)),
+        heat_rate=f["heat_rate"],
     )
 
 
-def _voltage(model: LinearSpm, batch: _Batch, surfaces: np.ndarray, current_a: np.ndarray) -> np.ndarray:
-    """Cell voltage (V) for surfaces (n_sets, n, 2) and currents broadcast to (n_sets, n)."""
+def _voltage(model: LinearSpm, batch: _Batch, surfaces: np.ndarray, current_a: np.ndarray,
+             temperature_k: np.ndarray | None = None) -> np.ndarray:
+    """Cell voltage (V) for surfaces (n_sets, n, 2), currents broadcast to (n_sets, n) and cell temperatures
+    (K, (n_sets, n); the batch's isothermal temperature when None)."""
     col = (slice(None), None)
-    return model.cell_voltage_v(surfaces[..., 0], surfaces[..., 1], current_a, batch.temperature_k[col],
+    temperature_k = batch.temperature_k[col] if temperature_k is None else temperature_k
+    return model.cell_voltage_v(surfaces[..., 0], surfaces[..., 1], current_a, temperature_k,
                                 batch.eps_n[col], batch.eps_p[col], batch.height_m[col])
 
 
 def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, *, c_n0_mol_m3=None,
               c_p0_mol_m3=None, temperature_k, sets: ParameterSets | None = None, backend: str = "auto",
-              keep_states: bool = False, initial_state: tuple[np.ndarray, np.ndarray] | None = None) -> CellRuns:
+              keep_states: bool = False, initial_state: tuple[np.ndarray, np.ndarray] | None = None,
+              initial_temperature_k=None, diffusivity_temperature=None) -> CellRuns:
     """Run cells from uniform particles through constant-current steps until the cut-off.
 
     Parameters
@@ -170,7 +186,14 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
         Instead of the concentrations: particle states (stoichiometry profiles, (n,) or
         (n_sets, n) each), e.g. a previous run's :attr:`CellRuns.final_state`.
     temperature_k : float or array_like
-        Cell temperature in K (isothermal), scalar or (n_sets,).
+        Cell temperature in K (isothermal), scalar or (n_sets,); the ambient temperature of a lumped
+        thermal cell (``model.thermal``, see :mod:`~battery_predictor.simulation.engine.thermal`).
+    initial_temperature_k : float or array_like, optional
+        Thermal cells: the cell temperature at the start (K); None starts at ``temperature_k``.
+    diffusivity_temperature : DiffusivityTemperature, optional
+        Thermal cells: the diffusivities' temperature dependence relative to ``temperature_k``
+        (:func:`~battery_predictor.simulation.engine.thermal.diffusivity_temperature`); required
+        for a thermal model.
     sets : ParameterSets, optional
         Cells that differ from the built one; None runs the built cell.
     backend : str
@@ -182,7 +205,10 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
     Returns
     -------
     CellRuns
-        ``extra["backend"]`` names the path that ran: ``"numba-fused"``, ``"numba"`` or ``"numpy"``.
+        ``extra["backend"]`` names the path that ran: ``"numba-fused"``, ``"numba"`` or ``"numpy"``
+        (``"numba-thermal"`` / ``"numpy-thermal"`` for a thermal cell, whose ``extra["temperature_k"]``
+        holds the cell temperature at every step boundary, (n_sets, n_steps + 1), and
+        ``extra["final_temperature_k"]`` the one at ``end_time_s``).
     """
     duration_s = np.asarray(duration_s, dtype=float)
     current = np.asarray(cell_current_a, dtype=float)
@@ -210,6 +236,14 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
                     for y, blk in zip(initial_state, model.blocks))
     z0 = np.ascontiguousarray(np.broadcast_to(modal.modal_state(y_n, y_p), (n_sets, modal.n_modes)))
     edges = np.concatenate([[0.0], np.cumsum(duration_s)])
+    if model.thermal is not None:
+        if diffusivity_temperature is None:
+            raise SimulationError("a lumped thermal cell needs its diffusivities' temperature dependence "
+                                  "(diffusivity_temperature)")
+        t0 = temperature_k if initial_temperature_k is None else initial_temperature_k
+        t0 = np.broadcast_to(np.asarray(t0, dtype=float), (n_sets,))
+        return _run_thermal(model, modal, batch, z0, t0, duration_s, current, edges, backend, diffusivity_temperature,
+                            stride=1 if keep_states else 64)
     kernel = None if keep_states or backend == "numpy" else fused_kernel(model, parallel=n_sets >= PARALLEL_MIN_SETS)
     if kernel is not None:
         from numba.core.errors import NumbaError
@@ -301,6 +335,118 @@ def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nd
                     extra=extra)
 
 
+@dataclass(frozen=True)
+class _ThermalSteps:
+    """A thermal run's sub-steps (steps longer than the thermal step split) and their trace."""
+
+    start_s: np.ndarray
+    duration_s: np.ndarray
+    current_a: np.ndarray
+    owner: np.ndarray
+    first: np.ndarray
+    trace: ThermalTrace
+
+
+def _run_thermal(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.ndarray, t0: np.ndarray,
+                 duration_s: np.ndarray, current: np.ndarray, edges: np.ndarray, backend: str,
+                 table: DiffusivityTemperature, stride: int) -> CellRuns:
+    """Thermal cells: particle and temperature recurrence on sub-steps, then the voltage on every boundary."""
+    n_sets, n_steps = z0.shape[0], duration_s.size
+    n_sub = split_steps(duration_s)
+    owner = np.repeat(np.arange(n_steps), n_sub)
+    first = np.concatenate([[0], np.cumsum(n_sub)[:-1]])
+    sub_h = np.repeat(duration_s / n_sub, n_sub)
+    sub_i = current[owner]
+    sub_start = edges[owner] + (np.arange(owner.size) - first[owner]) * sub_h
+    trace = thermal_recurrence(model, modal, batch.lam, batch.drive, z0, t0, batch.temperature_k, batch.eps_n,
+                               batch.eps_p, batch.height_m, sub_h, sub_i, table, heat_rate=batch.heat_rate,
+                               stride=stride, backend=backend)
+    temps = trace.temperature_k
+    lo, hi = TABLE_RANGE_K
+    if not (np.all(np.isfinite(temps)) and np.all((temps > lo) & (temps < hi))):
+        raise SimulationError(f"the lumped cell temperature left {lo:.0f}..{hi:.0f} K")
+    start_v = _voltage(model, batch, trace.surfaces[:, :-1], sub_i[None, :], temps[:, :-1])
+    end_v = _voltage(model, batch, trace.surfaces[:, 1:], sub_i[None, :], temps[:, 1:])
+    sub_edges = np.append(sub_start, edges[-1])
+    if not (np.all(np.isfinite(start_v)) and np.all(np.isfinite(end_v))):
+        raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
+    _check_range(start_v, end_v, sub_edges)
+    cut = model.lower_cutoff_v
+    below = (start_v < cut) | (end_v < cut)
+    any_below = below.any(axis=1)
+    sub_cut = np.where(any_below, below.argmax(axis=1), owner.size)
+    sets = np.arange(n_sets)
+    at_start = any_below & (start_v[sets, np.minimum(sub_cut, owner.size - 1)] < cut)
+    end_time = np.full(n_sets, edges[-1])
+    end_time[at_start] = sub_edges[sub_cut[at_start]]
+    final_t = temps[:, -1].copy()
+    final_t[at_start] = temps[at_start, sub_cut[at_start]]
+    steps = _ThermalSteps(start_s=sub_start, duration_s=sub_h, current_a=sub_i, owner=owner, first=first, trace=trace)
+    z_final = trace.z_end.copy()
+    ended = np.nonzero(any_below)[0]
+    if ended.size:
+        factors = modal.electrode_factors
+        z_k = _trace_take(trace, ended).states_at(batch.lam[ended], batch.drive[ended], sub_h, sub_i, factors,
+                                                  sub_cut[ended])
+        z_final[ended] = z_k
+        inside = np.nonzero(any_below & ~at_start)[0]
+        if inside.size:
+            pos = np.searchsorted(ended, inside)
+            k = sub_cut[inside]
+            sub = _take(batch, inside)
+            g = trace.diffusivity_factor[inside, k]
+            lam = sub.lam * factors(g[:, 0], g[:, 1])
+            t_k = temps[inside, k]
+            s_k = trace.surfaces[inside, k]
+
+            def temperature_at(tau, s_tau, sub=sub, s_k=s_k, t_k=t_k, k=k):
+                return _temperature_within(model, sub, s_k, s_tau, sub_i[k], t_k, tau)
+
+            tau = _cutoff_in_step(model, modal, _Batch(lam, sub.drive, sub.eps_n, sub.eps_p, sub.height_m, t_k),
+                                  z_k[pos], sub_h[k], sub_i[k], temperature_at=temperature_at)
+            end_time[inside] = sub_start[k] + tau
+            decay, phi = step_coefficients(lam, tau[:, None])
+            z_final[inside] = decay * z_k[pos] + phi * sub.drive * sub_i[k][:, None]
+            final_t[inside] = temperature_at(tau, z_final[inside] @ modal.surface_weights.T)
+    cutoff_step = np.where(any_below, owner[np.minimum(sub_cut, owner.size - 1)], n_steps)
+    # the step-level view: start voltages at each step's first sub-step, end voltages at its last
+    last = first + n_sub - 1
+    step_start_v, step_end_v = start_v[:, first], end_v[:, last]
+    step_at_start = at_start & (sub_cut == first[np.minimum(cutoff_step, n_steps - 1)])
+    cols = np.arange(n_steps)[None, :]
+    first_gone = cutoff_step + np.where(step_at_start, 0, 1)
+    step_start_v = np.where(cols >= first_gone[:, None], np.nan, step_start_v)
+    step_end_v = np.where(cols >= cutoff_step[:, None], np.nan, step_end_v)
+    boundary = np.append(first, owner.size)
+    extra = {"backend": f"{trace.backend}-thermal", "batch": batch, "thermal_steps": steps, "model": model,
+             "lam": batch.lam, "drive": batch.drive, "stride": stride,
+             "surfaces": trace.surfaces[:, boundary], "temperature_k": temps[:, boundary],
+             "final_temperature_k": final_t}
+    return CellRuns(step_start_s=edges[:-1], start_voltage_v=step_start_v, end_voltage_v=step_end_v,
+                    end_time_s=end_time, reached_cutoff=any_below, cutoff_step=cutoff_step,
+                    final_state=modal.block_states(z_final), extra=extra)
+
+
+def _temperature_within(model: LinearSpm, batch: _Batch, s_k: np.ndarray, s_tau: np.ndarray, current_a, t_k: np.ndarray,
+                        tau) -> np.ndarray:
+    """Cell temperature (K) ``tau`` into a step: Heun's step of length ``tau`` from ``(s_k, t_k)`` (surfaces
+    (..., 2) at the step start and at ``tau``), the recurrence's own rule, so that it needs nothing past ``tau``
+    (the step's end may lie past a cut-off where the cell emptied)."""
+    def rate(s, t):
+        return batch.heat_rate * model.thermal.temperature_rate_k_s(s[..., 0], s[..., 1], current_a, t,
+                                                                    batch.temperature_k, batch.eps_n, batch.eps_p,
+                                                                    batch.height_m)
+
+    r0 = rate(s_k, t_k)
+    return t_k + 0.5 * tau * (r0 + rate(s_tau, t_k + tau * r0))
+
+
+def _trace_take(trace: ThermalTrace, idx: np.ndarray) -> ThermalTrace:
+    return ThermalTrace(surfaces=trace.surfaces[idx], temperature_k=trace.temperature_k[idx],
+                        diffusivity_factor=trace.diffusivity_factor[idx], states=trace.states[idx],
+                        stride=trace.stride, z_end=trace.z_end[idx], backend=trace.backend)
+
+
 def _take(batch: _Batch, idx: np.ndarray) -> _Batch:
     return _Batch(*(getattr(batch, name)[idx] for name in batch.__dataclass_fields__))
 
@@ -313,13 +459,17 @@ def _within_step(modal: ModalSystem, batch: _Batch, z_k: np.ndarray, tau_s: np.n
 
 
 def _cutoff_in_step(model: LinearSpm, modal: ModalSystem, batch: _Batch, z_k: np.ndarray, h_s: np.ndarray,
-                    current_a: np.ndarray) -> np.ndarray:
-    """Time into the step (s) at which the voltage meets the cut-off (Illinois regula falsi, vectorised)."""
+                    current_a: np.ndarray, temperature_at=None) -> np.ndarray:
+    """Time into the step (s) at which the voltage meets the cut-off (Illinois regula falsi, vectorised).
+
+    With ``temperature_at(tau, surfaces)`` (thermal cells) the temperature inside the step is its value.
+    """
     cut = model.lower_cutoff_v
 
     def f(tau):
         s = _within_step(modal, batch, z_k, tau, current_a)
-        return model.cell_voltage_v(s[:, 0], s[:, 1], current_a, batch.temperature_k, batch.eps_n, batch.eps_p,
+        temperature_k = batch.temperature_k if temperature_at is None else temperature_at(tau, s)
+        return model.cell_voltage_v(s[:, 0], s[:, 1], current_a, temperature_k, batch.eps_n, batch.eps_p,
                                     batch.height_m) - cut
 
     lo, hi = np.zeros_like(h_s), h_s.copy()
@@ -348,6 +498,8 @@ def states_at_times(runs: CellRuns, modal: ModalSystem, duration_s, cell_current
     """Surface values (n_sets, n_times, 2) at ``time_s`` (right-continuous), from a run that kept its states."""
     if runs.extra.get("stride") != 1:
         raise SimulationError("states at arbitrary times need a run that kept every state (keep_states=True)")
+    if "thermal_steps" in runs.extra:
+        return _thermal_at_times(runs, modal, time_s)[0]
     duration_s = np.asarray(duration_s, dtype=float)
     current = np.asarray(cell_current_a, dtype=float)
     time_s = np.asarray(time_s, dtype=float)
@@ -372,6 +524,9 @@ def voltages_at_times(model: LinearSpm, runs: CellRuns, modal: ModalSystem, dura
     time_s = np.asarray(time_s, dtype=float)
     current = np.asarray(cell_current_a, dtype=float)
     step = np.clip(np.searchsorted(runs.step_start_s, time_s, side="right") - 1, 0, np.size(duration_s) - 1)
+    if "thermal_steps" in runs.extra:
+        surfaces, temperature_k = _thermal_at_times(runs, modal, time_s)
+        return _voltage(model, runs.extra["batch"], surfaces, current[step][None, :], temperature_k)
     on_start = time_s == runs.step_start_s[step]
     out = runs.start_voltage_v[:, step].copy()
     inside = np.nonzero(~on_start | np.isnan(out).any(axis=0))[0]
@@ -379,3 +534,59 @@ def voltages_at_times(model: LinearSpm, runs: CellRuns, modal: ModalSystem, dura
         surfaces = states_at_times(runs, modal, duration_s, current, time_s[inside])
         out[:, inside] = _voltage(model, runs.extra["batch"], surfaces, current[step[inside]][None, :])
     return out
+
+
+def _thermal_at_times(runs: CellRuns, modal: ModalSystem, time_s) -> tuple[np.ndarray, np.ndarray]:
+    """Surface values (n_sets, n_times, 2) and cell temperatures (K, (n_sets, n_times)) of a thermal run that
+    kept every state, at ``time_s`` (right-continuous; the temperature linear inside each sub-step)."""
+    steps: _ThermalSteps = runs.extra["thermal_steps"]
+    trace = steps.trace
+    if trace.stride != 1:
+        raise SimulationError("states at arbitrary times need a run that kept every state (keep_states=True)")
+    time_s = np.asarray(time_s, dtype=float)
+    k = np.clip(np.searchsorted(steps.start_s, time_s, side="right") - 1, 0, steps.start_s.size - 1)
+    tau = np.minimum(time_s - steps.start_s[k], steps.duration_s[k])
+    g = trace.diffusivity_factor[:, k]  # (n_sets, n_times, 2)
+    negative = np.arange(modal.n_modes) < modal.n_negative
+    per_mode = np.where(negative[None, None, :], g[..., :1], g[..., 1:])
+    decay, phi = step_coefficients(runs.extra["lam"][:, None, :] * per_mode, tau[None, :, None])
+    z = decay * trace.states[:, k] + phi * runs.extra["drive"][:, None, :] * steps.current_a[k][None, :, None]
+    surfaces = z @ modal.surface_weights.T
+    batch = runs.extra["batch"]
+    col = (slice(None), None)
+    per_set = _Batch(*(None if v is None else np.asarray(v)[col] for v in (
+        batch.lam, batch.drive, batch.eps_n, batch.eps_p, batch.height_m, batch.temperature_k, batch.heat_rate)))
+    temperature_k = _temperature_within(model_of(runs), per_set, trace.surfaces[:, k], surfaces,
+                                        steps.current_a[k][None, :], trace.temperature_k[:, k], tau[None, :])
+    return surfaces, temperature_k
+
+
+def temperatures_at_times(runs: CellRuns, modal: ModalSystem, time_s) -> np.ndarray:
+    """Cell temperature (K, (n_sets, n_times)) at ``time_s``: the lumped temperature of a thermal run that kept
+    every state, else the run's isothermal temperature."""
+    time_s = np.asarray(time_s, dtype=float)
+    if "thermal_steps" in runs.extra:
+        return _thermal_at_times(runs, modal, time_s)[1]
+    return np.repeat(runs.extra["batch"].temperature_k[:, None], time_s.size, axis=1)
+
+
+def thermal_state_at(runs: CellRuns, modal: ModalSystem, set_index: int, time_s: float) -> tuple[np.ndarray, float]:
+    """Modal state (1, n_modes) and cell temperature (K) of one set of a thermal run that kept every state."""
+    steps: _ThermalSteps = runs.extra["thermal_steps"]
+    trace = steps.trace
+    k = int(np.clip(np.searchsorted(steps.start_s, time_s, side="right") - 1, 0, steps.start_s.size - 1))
+    tau = min(float(time_s) - float(steps.start_s[k]), float(steps.duration_s[k]))
+    g = trace.diffusivity_factor[set_index, k]
+    lam = runs.extra["lam"][set_index] * modal.electrode_factors(g[0], g[1])[0]
+    decay, phi = step_coefficients(lam, tau)
+    z = decay * trace.states[set_index, k] + phi * runs.extra["drive"][set_index] * steps.current_a[k]
+    batch = _take(runs.extra["batch"], np.array([set_index]))
+    s_tau = z[None, :] @ modal.surface_weights.T
+    temperature_k = _temperature_within(model_of(runs), batch, trace.surfaces[set_index, k][None, :], s_tau,
+                                        steps.current_a[k], trace.temperature_k[set_index, k:k + 1], tau)
+    return z[None, :], float(temperature_k[0])
+
+
+def model_of(runs: CellRuns) -> LinearSpm:
+    """The extracted cell a run was made with."""
+    return runs.extra["model"]

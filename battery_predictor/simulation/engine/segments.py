@@ -11,6 +11,12 @@ A weak series group (extension ``cell_imbalance``) is a second cell whose electr
 weak fraction of the normal one's (a parameter set of the same extraction, no rebuild); both start
 at the same SOC, the pack voltage is ``(series - 1) V_normal + V_weak - I R_eq`` and the run ends
 when either cell reaches the cut-off.
+
+Params with the PyBaMM option ``{"thermal": "lumped"}`` run lumped thermal cells
+(:mod:`~battery_predictor.simulation.engine.thermal`): ``temperature_k`` of a run is the ambient
+temperature, the cells start at it from an SOC or at the temperature a carried state ended at
+(:attr:`EngineState.cell_temperature_k`), and the series resistance's Arrhenius factor follows the
+normal cells' temperature at every sample.
 """
 
 from __future__ import annotations
@@ -24,9 +30,16 @@ from battery_predictor.simulation.cell_setup import prepared_parameter_values
 from battery_predictor.simulation.engine.modal import modal_system, step_coefficients
 from battery_predictor.simulation.engine.model import diffusivity_m2_s, extract_linear_spm
 from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
-from battery_predictor.simulation.engine.run import ParameterSets, run_cells, states_at_times
+from battery_predictor.simulation.engine.run import (
+    ParameterSets,
+    run_cells,
+    states_at_times,
+    temperatures_at_times,
+    thermal_state_at,
+)
 from battery_predictor.simulation.engine.simulator import CELL_MODEL_EXTENSIONS, DIFFUSIVITY_KEYS
 from battery_predictor.simulation.engine.state import StoichiometryWindow
+from battery_predictor.simulation.engine.thermal import DiffusivityTemperature, diffusivity_temperature
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 #: Stoichiometries a starting SOC must keep away from 0 and 1.
@@ -47,12 +60,16 @@ class EngineState:
         SOC the first run started from.
     charge_ah : float
         Net pack charge drawn since then (Ah, positive = discharge).
+    cell_temperature_k : numpy.ndarray or None
+        Lumped thermal cells: the temperature (K) of the normal cells and, with a weak group, of
+        the weak group's; None for isothermal cells.
     """
 
     particles: tuple[np.ndarray, np.ndarray]
     soc_start: float
     charge_ah: float
     weak_particles: tuple[np.ndarray, np.ndarray] | None = None
+    cell_temperature_k: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -135,6 +152,7 @@ class EnginePack:
         pv = prepared_parameter_values(params)
         self._pv = pv
         self._diffusivity_factors: dict[float, tuple[float, float]] = {}
+        self._tables: dict[float, DiffusivityTemperature] = {}
         self.window = StoichiometryWindow(self.model, pv)
         p = params.interconnect
         self.r_eq_ohm = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
@@ -188,6 +206,10 @@ class EnginePack:
         f_n, f_p = self._diffusivity_factors_at(float(temperature_k))
         sets = ParameterSets(height=self._heights, diffusivity_n=f_n, diffusivity_p=f_p)
         common = dict(temperature_k=float(temperature_k), backend=self.backend, keep_states=True, sets=sets)
+        if self.model.thermal is not None:
+            common["diffusivity_temperature"] = self._table_at(float(temperature_k))
+            if isinstance(start, EngineState) and start.cell_temperature_k is not None:
+                common["initial_temperature_k"] = np.broadcast_to(start.cell_temperature_k, self._heights.shape)
         if isinstance(start, EngineState):
             particles = start.particles
             if self._heights.size > 1:
@@ -226,14 +248,15 @@ class EnginePack:
             return EngineSegmentRun(np.zeros(1), np.full(1, np.nan), np.zeros(1), [], True, 0.0, state)
         time_s, owner = np.concatenate(times), np.concatenate(owners)
         batch = runs.extra["batch"]
-        v_cells = []
+        v_cells, cell_temperatures = [], []
         for s in range(runs.end_time_s.size):
-            surfaces = self._surfaces(runs, s, duration_s, cell_a, time_s, owner)
+            surfaces, cell_temperature_k = self._surfaces(runs, s, duration_s, cell_a, time_s, owner)
+            cell_temperatures.append(cell_temperature_k)
             v_cells.append(self.model.cell_voltage_v(surfaces[:, 0], surfaces[:, 1], cell_a[owner],
-                                                     batch.temperature_k[s], batch.eps_n[s], batch.eps_p[s],
+                                                     cell_temperature_k, batch.eps_n[s], batch.eps_p[s],
                                                      batch.height_m[s]))
         pack_i = np.concatenate(amps)
-        r_eq = self.r_eq_ohm * float(series_resistance_factor(batch.temperature_k[0], self.series_activation_j_mol))
+        r_eq = self.r_eq_ohm * series_resistance_factor(cell_temperatures[0], self.series_activation_j_mol)
         v_pack = pack_voltage_v(v_cells[0], pack_i - self.current_offset_a, series=self.params.series,
                                 r_eq_ohm=r_eq, weak_cell_voltage_v=v_cells[1] if len(v_cells) > 1 else None)
         done = last if reached else duration_s.size
@@ -241,7 +264,7 @@ class EnginePack:
         if reached:
             charge_as += (end_s - float(runs.step_start_s[done])) * pack_a[done]
         state = EngineState(particles=state.particles, soc_start=soc_start, charge_ah=charge0 + charge_as / 3600.0,
-                            weak_particles=state.weak_particles)
+                            weak_particles=state.weak_particles, cell_temperature_k=state.cell_temperature_k)
         return EngineSegmentRun(time_s=time_s, pack_voltage_v=v_pack, pack_current_a=pack_i, segment_end_index=ends,
                                 reached_cutoff=reached, end_time_s=end_s, final_state=state)
 
@@ -255,24 +278,49 @@ class EnginePack:
             self._diffusivity_factors[temperature_k] = (f_n, f_p)
         return self._diffusivity_factors[temperature_k]
 
-    def _surfaces(self, runs, set_index: int, duration_s, cell_a, time_s: np.ndarray, owner: np.ndarray) -> np.ndarray:
-        """Surface stoichiometries of one set at ``time_s``, each inside (or at the end of) its own segment."""
+    def _table_at(self, temperature_k: float) -> DiffusivityTemperature:
+        """Thermal cells: the diffusivities' temperature dependence relative to ``temperature_k``."""
+        if temperature_k not in self._tables:
+            if len(self._tables) > 64:
+                self._tables.clear()
+            self._tables[temperature_k] = diffusivity_temperature(self._pv, DIFFUSIVITY_KEYS, temperature_k)
+        return self._tables[temperature_k]
+
+    def _surfaces(self, runs, set_index: int, duration_s, cell_a, time_s: np.ndarray,
+                  owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Surface stoichiometries (n, 2) and cell temperatures (K) of one set at ``time_s``, each inside (or at
+        the end of) its own segment."""
         surfaces = np.empty((time_s.size, 2))
+        temperature_k = np.empty(time_s.size)
         tau = time_s - runs.step_start_s[owner]
         at_end = tau >= duration_s[owner] - 1e-12
         surfaces[at_end] = runs.extra["surfaces"][set_index, owner[at_end] + 1]
+        if self.model.thermal is None:
+            temperature_k[:] = runs.extra["batch"].temperature_k[set_index]
+        else:
+            temperature_k[at_end] = runs.extra["temperature_k"][set_index, owner[at_end] + 1]
         inside = ~at_end
         if inside.any():
             surfaces[inside] = states_at_times(runs, self.modal, duration_s, cell_a, time_s[inside])[set_index]
-        return surfaces
+            if self.model.thermal is not None:
+                temperature_k[inside] = temperatures_at_times(runs, self.modal, time_s[inside])[set_index]
+        return surfaces, temperature_k
 
     def _state_at(self, runs, duration_s, cell_a, first: int, end_s: float, soc_start: float,
                   charge0: float) -> EngineState:
         """Particle states of every group at ``end_s`` (the first group's end: its own final state)."""
-        particles = []
+        particles, temperatures = [], []
         for s in range(runs.end_time_s.size):
             if s == first:
                 particles.append((runs.final_state[0][s], runs.final_state[1][s]))
+                if self.model.thermal is not None:
+                    temperatures.append(float(runs.extra["final_temperature_k"][s]))
+                continue
+            if self.model.thermal is not None:
+                z, temperature_k = thermal_state_at(runs, self.modal, s, end_s)
+                y_n, y_p = self.modal.block_states(z)
+                particles.append((y_n[0], y_p[0]))
+                temperatures.append(temperature_k)
                 continue
             step = min(int(np.searchsorted(runs.step_start_s, end_s, side="right")) - 1, duration_s.size - 1)
             tau = end_s - float(runs.step_start_s[step])
@@ -282,4 +330,5 @@ class EnginePack:
             y_n, y_p = self.modal.block_states(z)
             particles.append((y_n[0], y_p[0]))
         return EngineState(particles=particles[0], soc_start=soc_start, charge_ah=charge0,
-                           weak_particles=particles[1] if len(particles) > 1 else None)
+                           weak_particles=particles[1] if len(particles) > 1 else None,
+                           cell_temperature_k=np.array(temperatures) if temperatures else None)

@@ -9,8 +9,13 @@ and (where a PyBaMM rebuild confirms the rule once per model structure) maximum 
 reuse its extraction (scaling, no PyBaMM rebuild).
 
 Diffusivities that depend on the temperature only (PyBaMM functions, e.g. NCA_Kim2011) are taken at
-the request's temperature. What the engine does not cover (models other than the SPM, the
-extensions outside :data:`CELL_MODEL_EXTENSIONS`, model options or states that the voltage
+the request's temperature. Params with the PyBaMM option ``{"thermal": "lumped"}`` (``cell.options``)
+run a lumped thermal cell (:mod:`~battery_predictor.simulation.engine.thermal`): the request's
+temperature is the ambient one and the cell's initial one, the result carries the cell
+temperature at the report times (``extra["cell_temperature_k"]``) and ``extra["thermal"]``; electrode
+thicknesses scale the cell's heat capacity as PyBaMM's volume average of the layers does
+(``ParameterSets.heat_rate``). What the engine does not cover (models other than the SPM, the
+extensions outside :data:`ENGINE_EXTENSIONS`, model options or states that the voltage
 depends on beyond the particle surfaces, concentration-dependent diffusivities, per-cell values)
 is simulated by the fallback simulator (the fast one by default); the result says so in
 ``extra["engine_fallback"]`` and a warning is logged, so a fallback is never silent.
@@ -43,8 +48,20 @@ from battery_predictor.simulation.engine.model import (
     extract_linear_spm,
 )
 from battery_predictor.simulation.engine.pack import pack_voltage_v
-from battery_predictor.simulation.engine.run import CellRuns, ParameterSets, run_cells, voltages_at_times
+from battery_predictor.simulation.engine.run import (
+    CellRuns,
+    ParameterSets,
+    run_cells,
+    temperatures_at_times,
+    voltages_at_times,
+)
 from battery_predictor.simulation.engine.state import StoichiometryWindow
+from battery_predictor.simulation.engine.thermal import (
+    DiffusivityTemperature,
+    HeatCapacity,
+    diffusivity_temperature,
+    heat_capacity,
+)
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 LOG = logging.getLogger(__name__)
@@ -94,6 +111,10 @@ SCALABLE_KEYS = {
     HEIGHT: "height",
 }
 DIFFUSIVITY_KEYS = ("Negative particle diffusivity [m2.s-1]", "Positive particle diffusivity [m2.s-1]")
+THICKNESS_KEYS = ("Negative electrode thickness [m]", "Positive electrode thickness [m]")
+#: Temperatures (K) at which diffusivities are compared to reuse a table of their temperature dependence.
+_SIGNATURE_K = (233.15, 263.15, 298.15, 333.15, 373.15)
+
 #: The maximum concentrations, scalable where :func:`c_max_scaling_holds`.
 C_MAX_KEYS = {C_MAX_N: "c_max_n", C_MAX_P: "c_max_p"}
 _STATE_KEYS = frozenset({C_N0, C_P0})
@@ -101,6 +122,22 @@ _STATE_KEYS = frozenset({C_N0, C_P0})
 #: outside the simulator (the current offset is applied where a recording becomes a load); the
 #: extraction checks that the model still splits into linear particles and a voltage function.
 CELL_MODEL_EXTENSIONS = ("capacity_fade", "current_offset", "hysteresis", "resistance_growth")
+#: Extensions the simulator covers: the cell-model ones and ``temperature`` (its diffusivities and
+#: exchange currents are inside PyBaMM's model; its series-resistance factor is applied to ``R_eq``
+#: at the cell temperature, :func:`_series_resistance_ohm`).
+ENGINE_EXTENSIONS = CELL_MODEL_EXTENSIONS + ("temperature",)
+
+
+def _series_resistance_ohm(params, temperature_k) -> np.ndarray:
+    """The pack's ``R_eq`` (Ohm) at cell temperatures ``temperature_k`` (K): the extension ``temperature``'s
+    Arrhenius factor (:func:`~battery_predictor.diagnosis.extensions_impl.series_resistance_factor`), else constant."""
+    p = params.interconnect
+    r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"], p["r_t_ohm"])
+    if "temperature" not in params.extensions:
+        return np.asarray(r_eq, dtype=float)
+    from battery_predictor.diagnosis.extensions_impl import series_resistance_factor
+
+    return r_eq * series_resistance_factor(params, temperature_k)
 
 
 class EngineSimulator:
@@ -130,6 +167,8 @@ class EngineSimulator:
         self._cache: OrderedDict[tuple, tuple[LinearSpm, ModalSystem]] = OrderedDict()
         self._values: dict[tuple, object] = {}
         self._c_max_rule: dict[tuple, bool] = {}
+        self._tables: OrderedDict[tuple, DiffusivityTemperature] = OrderedDict()
+        self._heat_capacities: dict[tuple, HeatCapacity] = {}
         self.extractions = 0
 
     # ----------------------------------------------------------------- public
@@ -170,19 +209,19 @@ class EngineSimulator:
             raise SimulationError(f"engine: {reason}")
         model, modal, base = self._model(params, self._temperature_k(params, request))
         n_sets = max((np.size(v) for v in values.values()), default=1)
-        factors = self._batch_factors(params, model, base, values)
+        factors = self._batch_factors(params, model, base, values, self._temperature_k(params, request))
         c_n0, c_p0 = self._batch_concentrations(params, request, model, values, n_sets)
         load = request.load
         duration_s = np.diff(load.edges_s())
         cell_current_a = load.current_a / params.parallel
         tic = time.perf_counter()
+        temperature_k = self._temperature_k(params, request)
         runs = run_cells(model, modal, duration_s, cell_current_a, c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
-                         temperature_k=float(request.ambient_temperature_k or params.ambient_temperature_k),
-                         sets=ParameterSets(**factors), backend=self.backend)
+                         temperature_k=temperature_k, sets=ParameterSets(**factors), backend=self.backend,
+                         diffusivity_temperature=self._diffusivity_table(params, model, temperature_k))
         engine_s = time.perf_counter() - tic
-        p = params.interconnect
-        r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
-                                                 p["r_t_ohm"])
+        cell_temperature_k = temperature_k if model.thermal is None else runs.extra["temperature_k"][:, :-1]
+        r_eq = _series_resistance_ohm(params, cell_temperature_k)
         v_pack = pack_voltage_v(runs.start_voltage_v, load.current_a[None, :], series=params.series, r_eq_ohm=r_eq)
         return PackBatchResult(time_s=runs.step_start_s, cell_voltage_v=runs.start_voltage_v, pack_voltage_v=v_pack,
                                end_time_s=runs.end_time_s, reached_cutoff=runs.reached_cutoff, engine_seconds=engine_s,
@@ -215,7 +254,7 @@ class EngineSimulator:
             return "per-cell values need liionpack"
         if params.model != "SPM":
             return f"the engine covers the SPM, not the {params.model}"
-        outside = sorted(set(params.extensions) - set(CELL_MODEL_EXTENSIONS))
+        outside = sorted(set(params.extensions) - set(ENGINE_EXTENSIONS))
         if outside:
             return f"the engine does not cover the extensions {outside}"
         return None
@@ -235,6 +274,19 @@ class EngineSimulator:
         if structure not in self._c_max_rule:
             self._c_max_rule[structure] = c_max_scaling_holds(params)
         return {**SCALABLE_KEYS, **C_MAX_KEYS} if self._c_max_rule[structure] else SCALABLE_KEYS
+
+    def _diffusivity_table(self, params, model: LinearSpm, temperature_k: float) -> DiffusivityTemperature | None:
+        """Thermal cells: the params' diffusivities over the temperature relative to ``temperature_k`` (cached)."""
+        if model.thermal is None:
+            return None
+        pv = self._parameter_values(params)
+        signature = tuple(diffusivity_m2_s(pv, key, t) for key in DIFFUSIVITY_KEYS for t in _SIGNATURE_K)
+        key = (params.base_parameter_set, signature, float(temperature_k))
+        if key not in self._tables:
+            self._tables[key] = diffusivity_temperature(pv, DIFFUSIVITY_KEYS, temperature_k)
+            if len(self._tables) > self.cache_size:
+                self._tables.popitem(last=False)
+        return self._tables[key]
 
     @staticmethod
     def _temperature_k(params, request: SimulationRequest) -> float:
@@ -270,9 +322,24 @@ class EngineSimulator:
                 if not isinstance(value, (int, float)):
                     raise SimulationError(f"'{pybamm_key}' is not a constant; the engine needs a constant")
             factors[field_name] = float(value) / model.built_values[pybamm_key]
+        if model.thermal is not None:
+            factors["heat_rate"] = self._heat_rate(model, pv, temperature_k, factors)
         return model, modal, ParameterSets(**factors)
 
-    def _batch_factors(self, params, model: LinearSpm, base: ParameterSets, values: dict) -> dict:
+    def _heat_rate(self, model: LinearSpm, pv, temperature_k: float, factors: dict):
+        """Thermal cells: the built cell's heat capacity over that of the sets' electrode thicknesses."""
+        key = (model, float(temperature_k))
+        if key not in self._heat_capacities:
+            if len(self._heat_capacities) > 64:
+                self._heat_capacities.clear()
+            self._heat_capacities[key] = heat_capacity(pv, temperature_k)
+        capacity = self._heat_capacities[key]
+        l_n, l_p = (model.built_values[k] for k in THICKNESS_KEYS)
+        return capacity.j_m3_k(l_n, l_p) / capacity.j_m3_k(l_n * np.asarray(factors.get("thickness_n", 1.0)),
+                                                           l_p * np.asarray(factors.get("thickness_p", 1.0)))
+
+    def _batch_factors(self, params, model: LinearSpm, base: ParameterSets, values: dict,
+                       temperature_k: float) -> dict:
         scalable = self._scalable_keys(params)
         unknown = set(values) - set(scalable) - _STATE_KEYS
         if unknown:
@@ -281,6 +348,9 @@ class EngineSimulator:
         for key, arr in values.items():
             if key in scalable:
                 factors[scalable[key]] = np.asarray(arr, dtype=float) / model.built_values[key]
+        if model.thermal is not None:
+            factors["heat_rate"] = self._heat_rate(model, self._parameter_values(params),
+                                                   temperature_k, factors)
         return factors
 
     def _initial_concentrations(self, params, request: SimulationRequest, model: LinearSpm) -> tuple[float, float]:
@@ -314,19 +384,23 @@ class EngineSimulator:
         step = np.clip(np.searchsorted(load.start_s, t_out, side="right") - 1, 0, load.start_s.size - 1)
         on_starts = bool(np.all(t_out == load.start_s[step]))  # then the run's step-start voltages are the report
         runs = run_cells(model, modal, duration_s, cell_current_a, c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
-                         temperature_k=temperature_k, sets=sets, backend=self.backend, keep_states=not on_starts)
+                         temperature_k=temperature_k, sets=sets, backend=self.backend, keep_states=not on_starts,
+                         diffusivity_temperature=self._diffusivity_table(params, model, temperature_k))
         end_time_s = float(runs.end_time_s[0])
         keep = t_out < end_time_s if runs.reached_cutoff[0] else t_out <= end_time_s
         t_out = t_out[keep]
+        cell_temperature_k = None
         if on_starts:
             v_cell = runs.start_voltage_v[0, step[keep]]
+            if model.thermal is not None:
+                cell_temperature_k = runs.extra["temperature_k"][0, step[keep]]
         else:
             v_cell = voltages_at_times(model, runs, modal, duration_s, cell_current_a, t_out)[0]
+            if model.thermal is not None:
+                cell_temperature_k = temperatures_at_times(runs, modal, t_out)[0]
         engine_s = time.perf_counter() - t_engine
         i_pack = load.current_at(t_out)
-        p = params.interconnect
-        r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
-                                                 p["r_t_ohm"])
+        r_eq = _series_resistance_ohm(params, temperature_k if cell_temperature_k is None else cell_temperature_k)
         v_pack = pack_voltage_v(v_cell, i_pack, series=params.series, r_eq_ohm=r_eq)
         if not np.all(np.isfinite(v_pack)):
             raise SimulationError("engine simulation produced non-finite voltages")
@@ -338,7 +412,9 @@ class EngineSimulator:
             termination="cell_cutoff" if runs.reached_cutoff[0] else "end_of_load",
             end_time_s=end_time_s,
             seconds=time.perf_counter() - tic,
-            extra={"r_eq_ohm": r_eq, "engine_seconds": engine_s, "engine_backend": runs.extra["backend"]},
+            extra={"r_eq_ohm": r_eq, "engine_seconds": engine_s, "engine_backend": runs.extra["backend"],
+                   "thermal": "isothermal" if model.thermal is None else "lumped",
+                   **({} if cell_temperature_k is None else {"cell_temperature_k": cell_temperature_k})},
         )
 
 
