@@ -159,3 +159,13 @@ def test_thicker_electrodes_scale_the_heat_capacity_as_a_pybamm_rebuild(thermal_
     np.testing.assert_allclose(scaled.extra["cell_temperature_k"], rebuilt.extra["cell_temperature_k"], rtol=0,
                                atol=1e-9)
     np.testing.assert_allclose(scaled.pack_voltage_v, rebuilt.pack_voltage_v, rtol=0, atol=1e-9)
+
+
+def test_a_thermal_run_without_every_state_kept_ends_where_one_with_them_does(thermal_temi):
+    load = _temi_day(2400.0, 8.0, 5.0)
+    sim = EngineSimulator(fallback=None)
+    on_starts = sim.simulate(thermal_temi, SimulationRequest(load=load, initial_soc=0.5))  # states every 64 steps
+    inside = sim.simulate(thermal_temi, SimulationRequest(load=load, initial_soc=0.5,
+                                                          output_time_s=load.start_s + 1.0))  # every state kept
+    assert on_starts.reached_cutoff and inside.reached_cutoff
+    assert on_starts.end_time_s == pytest.approx(inside.end_time_s, abs=1e-6)

@@ -6,6 +6,8 @@
   coordinates (Numba kernel when installed, NumPy otherwise);
 - :mod:`~battery_predictor.simulation.engine.run`: cell runs with the voltage at every step and the
   exact cut-off time, batched over parameter sets and initial states;
+- :mod:`~battery_predictor.simulation.engine.thermal`: the lumped thermal cell (PyBaMM's
+  ``{"thermal": "lumped"}`` heat equation, temperature stepped with the particles);
 - :mod:`~battery_predictor.simulation.engine.state`: initial concentrations for an SOC or an
   open-circuit voltage;
 - :mod:`~battery_predictor.simulation.engine.pack`: the pack voltage (the one implementation);

@@ -5,7 +5,9 @@ scalar code: PyBaMM's code printer (``pybamm.to_python``) writes it as NumPy sta
 rows of the voltage input array; the rows become scalar arguments and the NumPy functions
 their ``math`` counterparts, and Numba compiles the result together with the stepping loop.
 Expressions using anything else (interpolated data, constants arrays) have no compiled form;
-:func:`fused_kernel` then returns None and the caller uses the NumPy path.
+:func:`fused_kernel` then returns None and the caller uses the NumPy path. A lumped thermal cell's
+heat equation is printed the same way for the thermal recurrence (:func:`thermal_kernel`,
+:mod:`~battery_predictor.simulation.engine.thermal`).
 """
 
 from __future__ import annotations

@@ -28,6 +28,12 @@ fraction ``eps L R_0 / (L_0 R)``. A maximum concentration ``c_max`` scales ``b_e
 homogeneous of degree one in the surface and maximum concentrations (as in the parameter sets
 shipped with PyBaMM that the project uses), the voltage's current density with ``1 / c_max``:
 :func:`c_max_scaling_holds` checks that rule on a PyBaMM rebuild before it is used.
+
+A model built with the option ``{"thermal": "lumped"}`` has one more state, the cell temperature.
+The extraction takes the particle equations at the built temperature (their temperature
+dependence, the diffusivities', is a factor on the eigenvalues), puts the temperature state into the
+voltage's temperature row, and rewrites PyBaMM's discretised heat equation on the same rows plus
+the ambient temperature (:class:`LumpedThermal`).
 """
 
 from __future__ import annotations
