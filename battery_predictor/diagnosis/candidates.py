@@ -157,18 +157,23 @@ Baseline = Candidate
 class Temperature(Candidate):
     """What a cold (or warm) cell does differently, with the physics measured cells show.
 
+    * **Accessible capacity** (equilibrium, at any rate): the positive electrode's stoichiometry window
+      narrows in the cold, a fitted fraction per kelvin below 298.15 K (``window_loss_per_k``,
+      :func:`~battery_predictor.diagnosis.extensions_impl.cold_window_scale`): the lithiated end of the
+      window becomes inaccessible, so the discharge reaches its knee earlier even at 0.1C (the LG M50
+      cells deliver 5 % less at 10 degC and 10 % less at 0 degC at 0.1C, docs/findings.md), and the cell
+      gets the capacity back as it warms (self-heating follows the measured temperature).
     * **Transport**: Arrhenius solid diffusion in both particles (one activation energy): in the cold
-      the particle surface saturates early, so the accessible capacity falls with temperature and
-      current - a temperature-dependent capacity with a physical basis (diffusion-limited end of
-      discharge), not a fitted capacity factor. The extension also offers a positive-particle
-      activation energy that grows towards full lithiation (``EA_POS_FULL``); fitted here it
-      extrapolated badly on held-out data (docs/findings.md), so the candidate does not fit it.
-    * **Ohmic transport**: the cell resistance the SPM lacks (electrolyte, SEI), Arrhenius with
-      30 kJ/mol; only its excess over 298.15 K is added (the identified model already carries the
-      reference temperature's drop), so it grows in the cold and shrinks as the cell warms. Its
-      one fitted value is the resistance at 298.15 K. (The exchange-current densities keep the base
-      set's own Arrhenius factor; an extra activation energy for them is available in the
-      extension, ``EA_KINETICS``, but was not better on the Panasonic cell, docs/findings.md.)
+      the particle surface saturates early under load - the rate-dependent part of the capacity loss.
+      The extension also offers a positive-particle activation energy that grows towards full
+      lithiation (``EA_POS_FULL``); fitted here it extrapolated badly on held-out data
+      (docs/findings.md), so the candidate does not fit it.
+    * **Ohmic transport and kinetics**: the cell resistance the SPM lacks (electrolyte, SEI), Arrhenius
+      with 30 kJ/mol; only its excess over 298.15 K is added (the identified model already carries the
+      reference temperature's drop), so it grows in the cold and shrinks as the cell warms. Its one
+      fitted value is the resistance at 298.15 K. The exchange-current densities keep the base set's
+      own Arrhenius factor (an extra activation energy, ``EA_KINETICS``, fitted to ~0 on the Panasonic
+      cell, docs/findings.md).
     * **Self-heating**: the cell follows its measured temperature; without one, a lumped thermal
       model from the first temperature with a fitted heat transfer coefficient.
 
@@ -177,9 +182,9 @@ class Temperature(Candidate):
     """
 
     name = "temperature"
-    title = ("Arrhenius solid diffusion (accessible capacity falls in the cold) and exchange-current kinetics "
-             "(fitted activation energies), the cell following its measured temperature (or, unmeasured, a "
-             "lumped thermal model with a fitted heat transfer coefficient: self-heating)")
+    title = ("positive stoichiometry window narrowing in the cold (accessible capacity at any rate), Arrhenius "
+             "solid diffusion and Arrhenius cell resistance (fitted), the cell following its measured temperature "
+             "(or, unmeasured, a lumped thermal model with a fitted heat transfer coefficient: self-heating)")
     signature = ("temperature", "current")
 
     @staticmethod
@@ -188,7 +193,8 @@ class Temperature(Candidate):
 
     def parameters(self, params, observed=None):
         out = (CandParam("diffusivity_activation_energy_J_mol", 0.0, 80000.0, 25000.0, unit="J/mol"),
-               CandParam("cold_resistance_ohm", 1e-5, 0.2, 2e-3, log=True, unit="Ohm per cell at 298.15 K"))
+               CandParam("cold_resistance_ohm", 1e-5, 0.2, 2e-3, log=True, unit="Ohm per cell at 298.15 K"),
+               CandParam("window_loss_per_k", 0.0, 0.02, 0.002, unit="1/K below 298.15 K"))
         if observed is not None and all(self._measured(o) for o in observed):
             return out
         return out + (CandParam("heat_transfer_coefficient_W_m2K", 0.5, 200.0, 10.0, log=True, unit="W/m2/K"),)
@@ -197,7 +203,7 @@ class Temperature(Candidate):
         return self._with_extension(params, {ext.HEAT_TRANSFER: 10.0})
 
     def extra_inputs(self):
-        return (ext.EA_NEG, ext.EA_POS, ext.EA_POS_FULL, ext.HEAT_TRANSFER)
+        return (ext.EA_NEG, ext.EA_POS, ext.EA_POS_FULL, ext.COLD_WINDOW, ext.HEAT_TRANSFER)
 
     def ambient_k(self, obs):
         return obs.first_temperature_k
@@ -205,7 +211,8 @@ class Temperature(Candidate):
     def run_arguments(self, params, theta):
         ea = theta["diffusivity_activation_energy_J_mol"]
         values = {ext.EA_NEG: ea, ext.EA_POS: ea,
-                  ext.EA_POS_FULL: theta.get("full_lithiation_activation_energy_J_mol", 0.0)}
+                  ext.EA_POS_FULL: theta.get("full_lithiation_activation_energy_J_mol", 0.0),
+                  ext.COLD_WINDOW: theta.get("window_loss_per_k", 0.0)}
         if "heat_transfer_coefficient_W_m2K" in theta:
             values[ext.HEAT_TRANSFER] = theta["heat_transfer_coefficient_W_m2K"]
         return {"values": values, "post": Post(cold_resistance_ohm=theta["cold_resistance_ohm"])}
@@ -219,7 +226,7 @@ class Temperature(Candidate):
             args["values"].setdefault(ext.HEAT_TRANSFER, 10.0)
         else:
             args["values"].pop(ext.HEAT_TRANSFER, None)
-        inputs = (ext.EA_NEG, ext.EA_POS, ext.EA_POS_FULL) + (() if measured else (ext.HEAT_TRANSFER,))
+        inputs = (ext.EA_NEG, ext.EA_POS, ext.EA_POS_FULL, ext.COLD_WINDOW) + (() if measured else (ext.HEAT_TRANSFER,))
         return engine.simulate(struct, obs, concentrations=self.concentrations(engine, params, theta, soc),
                                ambient_k=self.ambient_k(obs), t_end=t_end, extra_inputs=inputs,
                                want_temperature=want_temperature, temperature_trace=measured, **args)
@@ -228,7 +235,8 @@ class Temperature(Candidate):
         values = {ext.EA_NEG: theta["diffusivity_activation_energy_J_mol"],
                   ext.EA_POS: theta["diffusivity_activation_energy_J_mol"],
                   ext.COLD_RESISTANCE: theta["cold_resistance_ohm"],
-                  ext.EA_POS_FULL: theta.get("full_lithiation_activation_energy_J_mol", 0.0)}
+                  ext.EA_POS_FULL: theta.get("full_lithiation_activation_energy_J_mol", 0.0),
+                  ext.COLD_WINDOW: theta.get("window_loss_per_k", 0.0)}
         if "heat_transfer_coefficient_W_m2K" in theta:  # fitted without a measured temperature: self-heating
             values[ext.HEAT_TRANSFER] = theta["heat_transfer_coefficient_W_m2K"]
         return self._with_extension(params, values)

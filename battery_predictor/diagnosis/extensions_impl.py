@@ -78,6 +78,12 @@ COLD_RESISTANCE = "Arrhenius cell resistance at 298.15 K [Ohm]"
 #: Activation energy of :data:`COLD_RESISTANCE` (J/mol): 30 kJ/mol, between the electrolyte's ionic
 #: conductivity (10-20 kJ/mol) and the SEI / charge transfer (50-70 kJ/mol) of graphite cells.
 COLD_RESISTANCE_ACTIVATION_J_MOL = 30000.0
+#: Fraction of both electrodes' stoichiometry windows (from the charged end, 100 % SOC, towards the
+#: discharged end) that becomes inaccessible per kelvin below 298.15 K (1/K): the cell's accessible capacity
+#: falls in the cold at any rate, whichever electrode ends the discharge. See :func:`cold_window_scale`.
+COLD_WINDOW = "Stoichiometry window loss per kelvin below 298.15 K [K-1]"
+#: Reference temperature (K) of :data:`COLD_WINDOW` and :data:`COLD_RESISTANCE`.
+COLD_REFERENCE_K = 298.15
 HEAT_TRANSFER = "Total heat transfer coefficient [W.m-2.K-1]"
 CONTACT_RESISTANCE = "Contact resistance [Ohm]"
 CURRENT_OFFSET = "Current sensor offset [A]"
@@ -106,7 +112,8 @@ _OPTIONS = {
 #: Default values of each extension's own keys (the extension is then present but neutral, except
 #: the hysteresis, whose neutral value would be no hysteresis).
 EXTENSION_DEFAULTS: dict[str, dict[str, float]] = {
-    "temperature": {EA_NEG: 0.0, EA_POS: 0.0, EA_SERIES: 0.0, EA_KINETICS: 0.0, EA_POS_FULL: 0.0, COLD_RESISTANCE: 0.0},
+    "temperature": {EA_NEG: 0.0, EA_POS: 0.0, EA_SERIES: 0.0, EA_KINETICS: 0.0, EA_POS_FULL: 0.0, COLD_RESISTANCE: 0.0,
+                    COLD_WINDOW: 0.0},
     "resistance_growth": {CONTACT_RESISTANCE: 0.0},
     "current_offset": {CURRENT_OFFSET: 0.0},
     "cell_imbalance": {WEAK_FRACTION: 1.0},
@@ -289,6 +296,60 @@ def _arrhenius_exchange_current(j0, t_ref: float):
     return exchange_current
 
 
+def cold_window_scale(loss_per_k, temperature_k):
+    """How much faster the electrodes' stoichiometries advance in the cold: ``1 / (1 - loss max(T_ref - T, 0))`` (-).
+
+    With the window loss of :data:`COLD_WINDOW` each electrode's open-circuit potential is evaluated at
+    its charged-end stoichiometry plus ``scale`` times the distance from it (:func:`_cold_window_ocp`):
+    both windows, and with them the cell's open-circuit voltage over the charge drawn, are compressed
+    by ``1 / scale`` - an equilibrium loss of accessible capacity, present at any rate, that comes back
+    as the cell warms. 1 at and above 298.15 K (:data:`COLD_REFERENCE_K`); numbers or PyBaMM symbols.
+    """
+    import pybamm
+
+    if isinstance(temperature_k, pybamm.Symbol) or isinstance(loss_per_k, pybamm.Symbol):
+        below = COLD_REFERENCE_K - temperature_k
+        return 1.0 / pybamm.maximum(1.0 - loss_per_k * below, 0.2)
+    import numpy as np
+
+    below = COLD_REFERENCE_K - np.asarray(temperature_k, dtype=float)
+    return 1.0 / np.maximum(1.0 - float(loss_per_k) * below, 0.2)
+
+
+def _cold_window_ocp(ocp, sto_charged: float):
+    """An electrode OCP with its window narrowed at the cell's (ambient) temperature (:data:`COLD_WINDOW`).
+
+    ``sto_charged`` is the electrode's stoichiometry at 100 % SOC: the OCP is evaluated at
+    ``sto_charged + (sto - sto_charged) * scale`` (clipped to the electrode's range). The temperature
+    is PyBaMM's ``Ambient temperature [K]``: the cell's own temperature in the isothermal model, which
+    the diagnosis drives with the measured temperature and the predictor runs at the last measured one
+    (with the lumped thermal option the window follows the ambient, not the self-heated cell).
+    """
+    import pybamm
+
+    def narrowed(sto):
+        t_amb = pybamm.FunctionParameter("Ambient temperature [K]", {
+            "Distance across electrode width [m]": pybamm.Scalar(0.0),
+            "Distance across electrode height [m]": pybamm.Scalar(0.0),
+            "Time [s]": pybamm.t})
+        scale = cold_window_scale(pybamm.Parameter(COLD_WINDOW), t_amb)
+        moved = sto_charged + (sto - sto_charged) * scale
+        return ocp(pybamm.maximum(pybamm.minimum(moved, 1.0 - 1e-6), 1e-6))
+
+    return narrowed
+
+
+def _charged_stoichiometries(pv) -> tuple[float, float] | None:
+    """(x_100, y_100): both electrodes' stoichiometries at 100 % SOC of ``pv`` (None when PyBaMM cannot solve them)."""
+    import pybamm
+
+    try:
+        _, x100, y100, _ = pybamm.lithium_ion.get_min_max_stoichiometries(pv)
+        return float(x100), float(y100)
+    except Exception:  # noqa: BLE001 - a window PyBaMM cannot solve: no narrowing
+        return None
+
+
 def _shifted_ocp(ocp, sign: float):
     import pybamm
 
@@ -327,6 +388,11 @@ def apply_extension_parameter_values(params, pv):
             j0_key = f"{domain} electrode exchange-current density [A.m-2]"
             if j0_key in keys and callable(pv[j0_key]):
                 pv[j0_key] = _arrhenius_exchange_current(pv[j0_key], t_ref)
+        charged = _charged_stoichiometries(pv)
+        ocp_keys = ("Negative electrode OCP [V]", "Positive electrode OCP [V]")
+        if charged is not None and all(callable(pv[k]) for k in ocp_keys):
+            for key, sto_charged in zip(ocp_keys, charged):
+                pv[key] = _cold_window_ocp(pv[key], sto_charged)
     if "electrolyte_transport" in exts:
         b = pv[BRUGGEMAN]
         for key in BRUGGEMAN_KEYS:

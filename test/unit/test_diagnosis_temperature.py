@@ -87,3 +87,28 @@ def test_arrhenius_cell_resistance_adds_only_its_excess_over_the_reference_tempe
     params = replace(temi, extensions=("temperature",), extra={**dict(temi.extra), ext.COLD_RESISTANCE: r_ref})
     assert float(ext.series_resistance_factor(params, 298.15)) == pytest.approx(1.0)
     assert float(ext.series_resistance_factor(params, 273.15)) > 1.0
+
+
+def test_cold_window_scale_narrows_below_the_reference_temperature_and_widens_above():
+    assert float(ext.cold_window_scale(0.004, ext.COLD_REFERENCE_K)) == pytest.approx(1.0)
+    assert float(ext.cold_window_scale(0.004, 273.15)) == pytest.approx(1.0 / (1.0 - 0.004 * 25.0))
+    assert float(ext.cold_window_scale(0.004, 318.15)) == pytest.approx(1.0 / (1.0 + 0.004 * 20.0))
+    assert float(ext.cold_window_scale(0.0, 253.15)) == pytest.approx(1.0)
+
+
+@pytest.mark.slow
+def test_cold_window_shortens_a_cold_low_rate_discharge_and_changes_nothing_at_the_reference_temperature():
+    """Accessible capacity at any rate: a 0.5C discharge at 0 degC ends ~loss x 25 K earlier, at 25 degC it does not move."""
+    from battery_predictor.diagnosis.candidates import Temperature
+
+    params = load_params(PARAMS / "lgm50.yaml")
+    t = np.arange(0.0, 8000.0, 20.0)
+    ends = {}
+    for temp_k in (298.15, 273.15):
+        rec = Recording(t, np.linspace(4.1, 3.3, t.size), np.full(t.size, 2.5), np.full(t.size, temp_k))
+        obs = observe(rec, params)
+        for loss in (0.0, 0.004):
+            theta = {"diffusivity_activation_energy_J_mol": 0.0, "cold_resistance_ohm": 1e-5, "window_loss_per_k": loss}
+            ends[(temp_k, loss)] = Temperature().simulate(Engine(), params, obs, theta, 1.0).end_time_s
+    assert ends[(298.15, 0.004)] == pytest.approx(ends[(298.15, 0.0)], rel=2e-3)
+    assert ends[(273.15, 0.004)] < 0.95 * ends[(273.15, 0.0)]
