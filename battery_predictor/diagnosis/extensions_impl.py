@@ -18,7 +18,10 @@ extension                  what it changes
                            (:data:`EA_KINETICS`, on top of the base set's own), and of the pack's
                            series resistance ``R_eq`` the reference fit found (``Series resistance
                            activation energy [J.mol-1]``; :func:`series_resistance_factor`, applied by
-                           the fast simulator and the predictor's runner). The cell is isothermal at
+                           the fast simulator and the predictor's runner); a stoichiometry window of
+                           both electrodes that narrows below 298.15 K and widens above it
+                           (:data:`COLD_WINDOW`, :func:`cold_window_scale`: an accessible capacity
+                           that follows the temperature at any rate). The cell is isothermal at
                            the given (measured) temperature, as the predictor runs at the last
                            measured temperature; with ``Total heat transfer coefficient [W.m-2.K-1]``
                            in ``cell.extra`` (fitted on data without a temperature measurement) the
