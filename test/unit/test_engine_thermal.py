@@ -169,3 +169,28 @@ def test_a_thermal_run_without_every_state_kept_ends_where_one_with_them_does(th
                                                           output_time_s=load.start_s + 1.0))  # every state kept
     assert on_starts.reached_cutoff and inside.reached_cutoff
     assert on_starts.end_time_s == pytest.approx(inside.end_time_s, abs=1e-6)
+
+
+def test_simulate_cli_runs_the_lumped_cell_when_asked(temi_params, tmp_path, capsys):
+    import json
+    import warnings
+    from pathlib import Path
+
+    from battery_predictor.cli.main import main
+
+    load = StepLoad.constant(0.0, 60.0).append(_temi_day(1800.0, 8.0, 5.0))  # at rest first: the OCV
+    thermal = replace(temi_params, options=LUMPED)
+    truth = EngineSimulator(fallback=None).simulate(thermal, SimulationRequest(load=load, initial_soc=0.8))
+    csv = tmp_path / "day.csv"
+    rows = np.column_stack([truth.time_s, truth.pack_voltage_v, truth.pack_current_a])
+    np.savetxt(csv, rows, delimiter=",", header="time_s,voltage_V,current_A", comments="", fmt="%.6f")
+    params_file = str(Path(__file__).parents[2] / "params" / "temi.yaml")
+    out = {}
+    for mode in ("params", "lumped"):
+        with warnings.catch_warnings():  # the CLI sets its own warning filters
+            code = main(["simulate", "--params", params_file, "--data", str(csv), "--thermal", mode,
+                         "--initial-state", "voltage", "--json"])
+        assert code == 0
+        out[mode] = json.loads(capsys.readouterr().out)
+    assert out["params"]["thermal"] == "isothermal" and out["lumped"]["thermal"] == "lumped"
+    assert out["lumped"]["rmse_mV"] < out["params"]["rmse_mV"]  # the data were made by the lumped cell

@@ -140,7 +140,11 @@ def fused_kernel(model: LinearSpm, *, parallel: bool = False):
 
 
 def thermal_kernel(model: LinearSpm, *, parallel: bool = False):
-    """The compiled thermal recurrence for ``model``'s heat equation, or None (no Numba, or no scalar form)."""
+    """The compiled thermal recurrence for ``model``'s heat equation, or None (no Numba, or no scalar form).
+
+    When the voltage has a scalar form too the kernel also writes the voltage at every step start
+    and end; otherwise it is given none (``voltage_source`` empty) and the voltage runs in NumPy.
+    """
     try:
         import numba
     except ImportError:
@@ -150,11 +154,14 @@ def thermal_kernel(model: LinearSpm, *, parallel: bool = False):
     source = _RATE_SOURCES[model]
     if not source:
         return None
-    key = ("thermal", source, bool(parallel))
+    if model not in _SOURCES:
+        _SOURCES[model] = scalar_voltage_source(model) or ""
+    voltage_source = _SOURCES[model]
+    key = ("thermal", source, voltage_source, bool(parallel))
     if key not in _CACHE:
         from battery_predictor.simulation.engine.thermal import compile_thermal_kernel
 
-        _CACHE[key] = compile_thermal_kernel(numba, source, bool(parallel))
+        _CACHE[key] = compile_thermal_kernel(numba, source, voltage_source, bool(parallel))
     return _CACHE[key]
 
 

@@ -243,7 +243,7 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
         t0 = temperature_k if initial_temperature_k is None else initial_temperature_k
         t0 = np.broadcast_to(np.asarray(t0, dtype=float), (n_sets,))
         return _run_thermal(model, modal, batch, z0, t0, duration_s, current, edges, backend, diffusivity_temperature,
-                            stride=1 if keep_states else 64)
+                            stride=1 if keep_states else (8 if n_sets <= 16 else 64))
     kernel = None if keep_states or backend == "numpy" else fused_kernel(model, parallel=n_sets >= PARALLEL_MIN_SETS)
     if kernel is not None:
         from numba.core.errors import NumbaError
@@ -365,8 +365,11 @@ def _run_thermal(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nda
     lo, hi = TABLE_RANGE_K
     if not (np.all(np.isfinite(temps)) and np.all((temps > lo) & (temps < hi))):
         raise SimulationError(f"the lumped cell temperature left {lo:.0f}..{hi:.0f} K")
-    start_v = _voltage(model, batch, trace.surfaces[:, :-1], sub_i[None, :], temps[:, :-1])
-    end_v = _voltage(model, batch, trace.surfaces[:, 1:], sub_i[None, :], temps[:, 1:])
+    if trace.voltages_v is not None:  # the compiled kernel's, PyBaMM's printed voltage expression
+        start_v, end_v = trace.voltages_v
+    else:
+        start_v = _voltage(model, batch, trace.surfaces[:, :-1], sub_i[None, :], temps[:, :-1])
+        end_v = _voltage(model, batch, trace.surfaces[:, 1:], sub_i[None, :], temps[:, 1:])
     sub_edges = np.append(sub_start, edges[-1])
     if not (np.all(np.isfinite(start_v)) and np.all(np.isfinite(end_v))):
         raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
@@ -398,16 +401,22 @@ def _run_thermal(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nda
             lam = sub.lam * factors(g[:, 0], g[:, 1])
             t_k = temps[inside, k]
             s_k = trace.surfaces[inside, k]
+            # the root is found with the temperature's Euler line inside the step (the voltage moves by
+            # about a millivolt per kelvin; the step's temperature change is a few hundredths of one)
+            r_k = sub.heat_rate * model.thermal.temperature_rate_k_s(s_k[:, 0], s_k[:, 1], sub_i[k], t_k,
+                                                                     sub.temperature_k, sub.eps_n, sub.eps_p,
+                                                                     sub.height_m)
 
-            def temperature_at(tau, s_tau, sub=sub, s_k=s_k, t_k=t_k, k=k):
-                return _temperature_within(model, sub, s_k, s_tau, sub_i[k], t_k, tau)
+            def euler_temperature(tau, s_tau, t_k=t_k, r_k=r_k):
+                return t_k + tau * r_k
 
             tau = _cutoff_in_step(model, modal, _Batch(lam, sub.drive, sub.eps_n, sub.eps_p, sub.height_m, t_k),
-                                  z_k[pos], sub_h[k], sub_i[k], temperature_at=temperature_at)
+                                  z_k[pos], sub_h[k], sub_i[k], temperature_at=euler_temperature)
             end_time[inside] = sub_start[k] + tau
             decay, phi = step_coefficients(lam, tau[:, None])
             z_final[inside] = decay * z_k[pos] + phi * sub.drive * sub_i[k][:, None]
-            final_t[inside] = temperature_at(tau, z_final[inside] @ modal.surface_weights.T)
+            final_t[inside] = _temperature_within(model, sub, s_k, z_final[inside] @ modal.surface_weights.T,
+                                                  sub_i[k], t_k, tau)
     cutoff_step = np.where(any_below, owner[np.minimum(sub_cut, owner.size - 1)], n_steps)
     # the step-level view: start voltages at each step's first sub-step, end voltages at its last
     last = first + n_sub - 1

@@ -190,6 +190,9 @@ class ThermalTrace:
         Modal states at the end, (n_sets, n_modes).
     backend : str
         ``"numba"`` or ``"numpy"``.
+    voltages_v : tuple of numpy.ndarray or None
+        Cell voltage (V) at every step start and end under the step's current, (n_sets, n_steps)
+        each, when the compiled kernel evaluated them (else the caller evaluates the voltage).
     """
 
     surfaces: np.ndarray
@@ -199,6 +202,7 @@ class ThermalTrace:
     stride: int
     z_end: np.ndarray
     backend: str
+    voltages_v: tuple[np.ndarray, np.ndarray] | None = None
 
     def states_at(self, lam: np.ndarray, drive: np.ndarray, duration_s: np.ndarray, current_a: np.ndarray,
                   electrode_factors, step: np.ndarray) -> np.ndarray:
@@ -326,26 +330,47 @@ def _recurrence_numba(kernel, modal, lam, drive, z0, temperature0_k, ambient_k, 
     factors = np.empty((n_sets, n_steps, 2))
     states = np.empty((n_sets, n_steps // stride + 1, n_modes))
     z_end = np.empty((n_sets, n_modes))
+    kernel, has_voltage = kernel
+    start_v = np.empty((n_sets, n_steps)) if has_voltage else np.empty((1, 1))
+    end_v = np.empty((n_sets, n_steps)) if has_voltage else np.empty((1, 1))
     c = np.ascontiguousarray
     kernel(c(lam), c(drive), c(z0), c(np.asarray(temperature0_k, dtype=float)), c(np.asarray(ambient_k, dtype=float)),
            c(eps_n), c(eps_p), c(height_m), c(heat_rate), c(duration_s), c(current_a), c(modal.surface_weights),
            int(modal.n_negative), table.inverse_start_per_k, table.inverse_step_per_k, c(table.ln_factor), bool(table.constant),
-           int(stride), surfaces, temps, factors, states, z_end)
+           int(stride), surfaces, temps, factors, states, z_end, start_v, end_v)
+    voltages = (start_v, end_v) if has_voltage else None
     return ThermalTrace(surfaces=surfaces, temperature_k=temps, diffusivity_factor=factors, states=states,
-                        stride=stride, z_end=z_end, backend="numba")
+                        stride=stride, z_end=z_end, backend="numba", voltages_v=voltages)
 
 
-def compile_thermal_kernel(numba, rate_source: str, parallel: bool):
-    """The compiled recurrence for a heat equation printed as ``cell_rate(y0, ..., y7)`` (see kernel.py)."""
+def compile_thermal_kernel(numba, rate_source: str, voltage_source: str, parallel: bool):
+    """The compiled recurrence for a heat equation printed as ``cell_rate(y0, ..., y7)`` (see kernel.py).
+
+    With a ``voltage_source`` (``cell_voltage`` and ``cell_voltage_pair``, kernel.py) the kernel writes
+    the voltage at every step start and end; with an empty one it leaves them (``has_voltage`` False).
+    """
     namespace: dict = {"math": math}
     exec(compile(rate_source, "<pybamm heat equation>", "exec"), namespace)  # noqa: S102 - printed by PyBaMM
     rate = numba.njit(fastmath=False)(namespace["cell_rate"])
+    has_voltage = bool(voltage_source)
+    if has_voltage:
+        exec(compile(voltage_source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - printed by PyBaMM
+        voltage = numba.njit(fastmath=False)(namespace["cell_voltage"])
+        voltage_pair = numba.njit(fastmath=False)(namespace["cell_voltage_pair"])
+    else:
+        @numba.njit(fastmath=False)
+        def voltage(y0, y1, y2, y3, y4, y5, y6):  # pragma: no cover - compiled, never called
+            return math.nan
+
+        @numba.njit(fastmath=False)
+        def voltage_pair(y0, y1, y2a, y2b, y3, y4, y5, y6):  # pragma: no cover - compiled, never called
+            return math.nan, math.nan
 
     @numba.njit(parallel=parallel, fastmath=False)
     def kernel(lam, drive, z0, temperature0_k, ambient_k, eps_n, eps_p, height_m, heat_rate, duration_s, current_a,
                weights,
                n_neg, inv0, dinv, ln_factor, constant, stride, surfaces, temps, factors, states,
-               z_end):  # pragma: no cover - compiled
+               z_end, start_v, end_v):  # pragma: no cover - compiled
         n_sets, n_modes = z0.shape
         n_steps = duration_s.shape[0]
         n_grid = ln_factor.shape[1]
@@ -366,6 +391,8 @@ def compile_thermal_kernel(numba, rate_source: str, parallel: bool):
             for j in range(n_modes):
                 states[s, 0, j] = z[j]
             last_h = -1.0
+            if has_voltage and n_steps > 0:
+                start_v[s, 0] = voltage(sn, sp, current_a[0], t, en, ep, hh)
             for k in range(n_steps):
                 h = duration_s[k]
                 i = current_a[k]
@@ -403,6 +430,11 @@ def compile_thermal_kernel(numba, rate_source: str, parallel: bool):
                     sp += weights[1, j] * z[j]
                 r1 = f_rate * rate(sn, sp, i, t + h * r0, en, ep, hh, t_amb)
                 t = t + 0.5 * h * (r0 + r1)
+                if has_voltage:  # the step's end and the next step's start share the state
+                    if k + 1 < n_steps:
+                        end_v[s, k], start_v[s, k + 1] = voltage_pair(sn, sp, i, current_a[k + 1], t, en, ep, hh)
+                    else:
+                        end_v[s, k] = voltage(sn, sp, i, t, en, ep, hh)
                 surfaces[s, k + 1, 0] = sn
                 surfaces[s, k + 1, 1] = sp
                 temps[s, k + 1] = t
@@ -412,4 +444,4 @@ def compile_thermal_kernel(numba, rate_source: str, parallel: bool):
             for j in range(n_modes):
                 z_end[s, j] = z[j]
 
-    return kernel
+    return kernel, has_voltage
