@@ -250,6 +250,8 @@ class RuntimePoint:
         The message's ``status``.
     reason : str
         The message's ``reason``.
+    p10_s, p90_s : float
+        The message's ``remaining_p10_s`` and ``remaining_p90_s``, s (NaN when unknown).
     """
 
     time_s: float
@@ -257,6 +259,8 @@ class RuntimePoint:
     valid: bool
     status: int
     reason: str = ""
+    p10_s: float = math.nan
+    p90_s: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -267,6 +271,8 @@ class Checkpoint:
     time_s: float
     predicted_min: float
     true_min: float
+    p10_min: float = math.nan
+    p90_min: float = math.nan
 
     @property
     def error_min(self) -> float:
@@ -293,7 +299,8 @@ def compare_at_checkpoints(points: Sequence[RuntimePoint], truth: RuntimeTruth,
         if k < 0 or t_cp - times[k] > max_age_s:
             continue
         p = valid[k]
-        out.append(Checkpoint(float(cp), p.time_s, p.remaining_s / 60.0, truth.remaining_s(p.time_s) / 60.0))
+        out.append(Checkpoint(float(cp), p.time_s, p.remaining_s / 60.0, truth.remaining_s(p.time_s) / 60.0,
+                              p.p10_s / 60.0, p.p90_s / 60.0))
     return out
 
 

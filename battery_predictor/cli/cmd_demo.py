@@ -137,7 +137,8 @@ def _plan_route(session) -> list[str]:
              f"   route {' -> '.join(r.nodes)} ({r.length_m:.0f} m, {len(r.sections)} sections, "
              f"{r.route_duration_s / 60:.1f} min, {r.route_charge_ah:.2f} Ah)",
              f"   {'accept' if r.accepted else 'reject'}: {r.predicted_voltage_v:.2f} V at the standstill current "
-             f"after it, threshold {r.threshold_voltage_v:.2f} V, margin {r.margin_v:+.2f} V"]
+             f"after it, threshold {r.threshold_voltage_v:.2f} V, margin {r.margin_v:+.2f} V, probability above "
+             f"the threshold {r.probability_above_threshold:.3f} (accepted at risk {r.risk:.2f})"]
     kinds = {PlannedRoute.KIND_SHORTEST: "shortest", PlannedRoute.KIND_LEAST_CHARGE_PATH: "least-charge path",
              PlannedRoute.KIND_CHARGE_FIRST: "charge first"}
     for a in r.alternatives:
@@ -190,10 +191,13 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
     print(f"   played {stats.bag_s / 60:.0f} bag min in {stats.wall_s:.0f} s; {sum(p.valid for p in points)} valid predictions, "
           f"{rejected} samples rejected by the monitor")
     if checkpoints:
-        print(f"   {'after':>8} {'predicted':>10} {'true':>8} {'error':>8}")
+        print(f"   {'after':>8} {'predicted':>10} {'P10..P90':>14} {'true':>8} {'error':>8}")
         for c in checkpoints:
-            print(f"   {c.checkpoint_min:>4.0f} min {c.predicted_min:>6.1f} min {c.true_min:>4.0f} min "
-                  f"{c.error_min:>+5.1f} min")
+            print(f"   {c.checkpoint_min:>4.0f} min {c.predicted_min:>6.1f} min {c.p10_min:>6.0f}..{c.p90_min:<4.0f} min "
+                  f"{c.true_min:>4.0f} min {c.error_min:>+5.1f} min")
+        inside = sum(c.p10_min <= c.true_min <= c.p90_min for c in checkpoints)
+        print(f"   truth inside P10..P90 at {inside} of {len(checkpoints)} checkpoints (calibration over whole "
+              "discharges: docs/uncertainty)")
         e = error_summary(checkpoints)
         print(f"   MAE {e['mae_min']:.1f} min, max |error| {e['max_abs_error_min']:.1f} min, MAPE {e['mape_pct']:.1f} % "
               "(seed paper, real Temi: MAE 14.92 min, MAPE 18.9 %)")
@@ -227,13 +231,15 @@ def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
         route = longest_route(80.0)
         print(f"   /can_accept_route, the paper's longest route ({route.length_m:.0f} m, "
               f"{route.duration_s / 60:.1f} min, payload on the loaded leg):")
-        print(f"   {'payload':>8} {'decision':>9} {'V after':>9} {'threshold':>10} {'margin':>8} {'charge':>8}")
+        print(f"   {'payload':>8} {'decision':>9} {'V after':>9} {'threshold':>10} {'margin':>8} {'charge':>8} "
+              f"{'P(above)':>9} {'P10 V':>8}")
         reasons = []
         for kg in PAYLOADS_KG:
             request = CanAcceptRoute.Request(sections=route_section_msgs(longest_route(kg).sections))
             r = session.call_route(request)
             print(f"   {kg:>5.0f} kg {'accept' if r.accepted else 'reject':>9} {r.predicted_voltage_v:>7.2f} V "
-                  f"{r.threshold_voltage_v:>8.2f} V {r.margin_v:>+6.2f} V {r.route_charge_ah:>5.2f} Ah")
+                  f"{r.threshold_voltage_v:>8.2f} V {r.margin_v:>+6.2f} V {r.route_charge_ah:>5.2f} Ah "
+                  f"{r.probability_above_threshold:>9.3f} {r.voltage_at_risk_v:>6.2f} V")
             reasons.append(f"{kg:.0f} kg: {r.reason}")
         print("   reasons:\n     " + "\n     ".join(reasons))
         print("\n".join(_plan_route(session)))
@@ -273,6 +279,10 @@ def _real_data_figures(path: Path) -> None:
     for name, fig in pooled.items():
         print(f"      {name:<18} remaining-runtime MAE {fig['mae_min']:.1f} min, bias {fig['bias_min']:+.1f} min, "
               f"{fig['answered']}/{fig['checkpoints']} answered")
+    interval = summary.get("pooled_interval")
+    if interval:
+        print(f"      truth inside the predictor's P10..P90 at {interval['inside_pct']:.0f} % of {interval['intervals']} "
+              "checkpoints (target 80 +- 10 %; docs/uncertainty)")
 
 
 def run(args) -> int:

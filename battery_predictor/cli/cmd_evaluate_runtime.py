@@ -38,6 +38,9 @@ def register(sub) -> None:
     p.add_argument("--load-model", choices=("auto", "power", "current"), default=None,
                    help="what of the average load stays constant ahead (default: the predictor's, auto; see the "
                         "node parameter load_model)")
+    p.add_argument("--calibrate-uncertainty", default=None, metavar="PARAMS_OUT",
+                   help="calibrate the structural runtime spread so that P10..P90 holds 80 %% of these recordings' "
+                        "checkpoints (use the fit recordings, judge on others) and write the params with it here")
     p.add_argument("--out", default=None, metavar="DIR", help="write summary.json, checkpoints.json and plots here")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_input_check_arguments(p)
@@ -106,6 +109,10 @@ def run(args) -> int:
         if not args.json:
             _print_recording(res, list(capacities))
     summary = ev.summarise(results, list(capacities))
+    if args.calibrate_uncertainty:
+        calibrated = ev.with_runtime_sigma(params, results)
+        written = calibrated.to_yaml(args.calibrate_uncertainty)
+        summary["calibrated_uncertainty"] = {**calibrated.provenance["uncertainty"], "params_out": str(written)}
     summary.update({"params": str(params.source), "cutoff_v": cutoff_v, "peak_source": config.peak_source,
                     "load_model": config.load_model, "capacities_ah": capacities,
                     "checkpoints": list(checkpoints), "seconds": time.perf_counter() - tic})
@@ -129,6 +136,11 @@ def _line(name: str, f: dict) -> str:
             f"answered {f['answered']}/{f['checkpoints']}")
 
 
+def _interval_line(f: dict) -> str:
+    return (f"  {'P10..P90':<20} true inside {_fmt(f['inside_pct'], '.0f'):>4} % (target 80), below P10 "
+            f"{_fmt(f['below_p10_pct'], '.0f')} %, above P90 {_fmt(f['above_p90_pct'], '.0f')} % of {f['intervals']}")
+
+
 def _print_recording(res, counters: list[str]) -> None:
     from battery_predictor.evaluation.runtime_eval import summarise
 
@@ -138,6 +150,7 @@ def _print_recording(res, counters: list[str]) -> None:
           f"{_fmt(res.mean_temperature_c)} degC")
     for name in ["predictor", *(f"counter[{c}]" for c in counters)]:
         print(_line(name, block[name]))
+    print(_interval_line(block["interval"]))
     invalid = [c for c in res.checkpoints if not c.valid]
     for c in invalid:
         print(f"    invalid at {c.fraction:.0%}: {c.reason}")
@@ -148,6 +161,11 @@ def _print_pooled(summary: dict) -> None:
           + ", ".join(f"{k} {v:.3f} Ah" for k, v in summary["capacities_ah"].items()) + "):")
     for name, f in summary["pooled"].items():
         print(_line(name, f))
+    print(_interval_line(summary["pooled_interval"]))
+    if "calibrated_uncertainty" in summary:
+        cal = summary["calibrated_uncertainty"]
+        print(f"calibrated runtime spread: sigma {cal['runtime_log_sigma']:.3f} (log) on {cal['checkpoints']} "
+              f"checkpoints; params written to {cal['params_out']}")
     if "out" in summary:
         print(f"written: {summary['out']}/report.md, summary.json, checkpoints.json, runtime.png")
 
@@ -189,5 +207,12 @@ def report_markdown(summary: dict) -> str:
         lines.append(f"| {Path(r['source']).name} ({r['ended_by']}) | {_fmt(r['mean_temperature_c'])} | "
                      f"{_fmt(r['discharge_min'])} | {cells(r)} |")
     lines.append(f"| **pooled** | | | {cells(summary['pooled'])} |")
+    lines += ["", "P10..P90 of the predictor: how often the true remaining time fell inside (target 80 %), "
+              "below P10 and above P90 (10 % each).", "",
+              "| recording | inside % | below P10 % | above P90 % | intervals |", "|---|---|---|---|---|"]
+    rows = [(Path(r["source"]).name, r["interval"]) for r in summary["per_recording"]]
+    for name, f in [*rows, ("**pooled**", summary["pooled_interval"])]:
+        lines.append(f"| {name} | {_fmt(f['inside_pct'], '.0f')} | {_fmt(f['below_p10_pct'], '.0f')} | "
+                     f"{_fmt(f['above_p90_pct'], '.0f')} | {f['intervals']} |")
     lines += ["", "![predicted vs true remaining runtime](runtime.png)", ""]
     return "\n".join(lines)

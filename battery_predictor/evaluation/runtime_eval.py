@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -123,6 +123,13 @@ class CheckpointResult:
     status: int
     reason: str
     counters_s: dict[str, float] = field(default_factory=dict)
+    p10_s: float = math.nan
+    p90_s: float = math.nan
+    #: Log deviations of P10 / P90 from P50 without the structural part (to calibrate it).
+    lower_log_without_model: float = math.nan
+    upper_log_without_model: float = math.nan
+    #: ``{source: [lower, upper]}`` log deviations at the band (see :class:`~battery_predictor.prediction.uncertainty.Spread`).
+    spread_log: dict[str, list[float]] = field(default_factory=dict)
 
 
 @dataclass
@@ -182,11 +189,19 @@ def evaluate_recording(params: PackParams, rec: Recording, *, cutoff_v: float, c
         answer = core.remaining_runtime(stamp)
         counters = {name: counter_remaining_s(win, discharge.start_s, stamp, cap) for name, cap in capacities_ah.items()}
         truth = discharge.end_s - stamp if discharge.known else math.nan
+        lower, upper = answer.spread.total(without="model") if answer.spread is not None else (math.nan, math.nan)
         results.append(CheckpointResult(fraction, stamp - discharge.start_s, truth, answer.remaining_s, answer.valid,
-                                        answer.status, answer.reason, counters))
+                                        answer.status, answer.reason, counters, answer.remaining_p10_s,
+                                        answer.remaining_p90_s, lower, upper, _spread_parts(answer.spread)))
     temps = win.temperature_k[np.isfinite(win.temperature_k)]
     mean_c = float(np.mean(temps) - 273.15) if temps.size else math.nan
     return RecordingResult(str(rec.source), discharge, mean_c, results)
+
+
+def _spread_parts(spread) -> dict[str, list[float]]:
+    if spread is None:
+        return {}
+    return {k: [spread.lower.get(k, 0.0), spread.upper.get(k, 0.0)] for k in {**spread.lower, **spread.upper}}
 
 
 def charge_to_end_ah(params: PackParams, rec: Recording, cutoff_v: float, end_margin_v: float | None = None) -> float:
@@ -219,6 +234,48 @@ def error_summary(pairs: Sequence[tuple[float, float]], *, late_fraction_pairs: 
             "worst_late_pct": float(max(late)) if late else math.nan}
 
 
+def interval_coverage(checkpoints: Sequence[CheckpointResult]) -> dict[str, float]:
+    """How often the true remaining time fell inside P10..P90 (target 80 %), below P10 and above P90 (10 % each)."""
+    scored = [c for c in checkpoints if c.valid and math.isfinite(c.true_remaining_s) and c.true_remaining_s > 0
+              and math.isfinite(c.p10_s) and math.isfinite(c.p90_s)]
+    n = len(scored)
+    if not n:
+        return {"intervals": 0, "inside_pct": math.nan, "below_p10_pct": math.nan, "above_p90_pct": math.nan}
+    below = sum(c.true_remaining_s < c.p10_s for c in scored)
+    above = sum(c.true_remaining_s > c.p90_s for c in scored)
+    return {"intervals": n, "inside_pct": 100.0 * (n - below - above) / n, "below_p10_pct": 100.0 * below / n,
+            "above_p90_pct": 100.0 * above / n}
+
+
+def calibrate_runtime_sigma(results: Sequence[RecordingResult], coverage: float = 0.8) -> tuple[float, int]:
+    """Structural runtime sigma (log) with which P10..P90 holds ``coverage`` of these checkpoints, and their count."""
+    from battery_predictor.prediction.uncertainty import calibrated_model_sigma
+
+    rows = [c for r in results for c in r.checkpoints
+            if c.valid and math.isfinite(c.true_remaining_s) and math.isfinite(c.lower_log_without_model)]
+    sigma = calibrated_model_sigma([c.predicted_s for c in rows], [c.true_remaining_s for c in rows],
+                                   [c.lower_log_without_model for c in rows], [c.upper_log_without_model for c in rows],
+                                   coverage)
+    return sigma, len(rows)
+
+
+def with_runtime_sigma(params: PackParams, results: Sequence[RecordingResult], coverage: float = 0.8) -> PackParams:
+    """``params`` with ``provenance.uncertainty`` calibrated on these recordings' checkpoints (see :func:`calibrate_runtime_sigma`).
+
+    Raises
+    ------
+    InputDataError
+        When no checkpoint has a known truth and an interval.
+    """
+    sigma, n = calibrate_runtime_sigma(results, coverage)
+    if not (n and math.isfinite(sigma)):
+        raise InputDataError("no checkpoint with a known end of discharge and an interval to calibrate on")
+    provenance = dict(params.provenance)
+    provenance["uncertainty"] = {"runtime_log_sigma": float(sigma), "checkpoints": n, "coverage": coverage,
+                                 "calibrated_on": [r.source for r in results]}
+    return replace(params, provenance=provenance)
+
+
 def summarise(results: Sequence[RecordingResult], counters: Sequence[str], *, late_after: float = 0.3) -> dict:
     """Per recording and pooled figures of the predictor and each counter (see :func:`error_summary`)."""
 
@@ -236,8 +293,10 @@ def summarise(results: Sequence[RecordingResult], counters: Sequence[str], *, la
     return {
         "per_recording": [{"source": r.source, "ended_by": r.discharge.ended_by,
                            "discharge_min": (r.discharge.end_s - r.discharge.start_s) / 60.0,
-                           "mean_temperature_c": r.mean_temperature_c, **block(r.checkpoints)} for r in results],
+                           "mean_temperature_c": r.mean_temperature_c, **block(r.checkpoints),
+                           "interval": interval_coverage(r.checkpoints)} for r in results],
         "pooled": block(every),
+        "pooled_interval": interval_coverage(every),
         "late_after_fraction": late_after,
     }
 

@@ -31,7 +31,11 @@ def plot_runtime(results: Sequence[RecordingResult], path: str | Path) -> Path:
         ax.plot(elapsed, [c.true_remaining_s / 60.0 for c in res.checkpoints], color="black", lw=1.5, label="true")
         ax.plot([c.time_s / 60.0 for c in res.checkpoints if c.valid],
                 [c.predicted_s / 60.0 for c in res.checkpoints if c.valid], "o-", color="tab:red", ms=4,
-                label="predictor")
+                label="predictor (P50)")
+        banded = [c for c in res.checkpoints if c.valid and math.isfinite(c.p10_s) and math.isfinite(c.p90_s)]
+        if banded:
+            ax.fill_between([c.time_s / 60.0 for c in banded], [c.p10_s / 60.0 for c in banded],
+                            [c.p90_s / 60.0 for c in banded], color="tab:red", alpha=0.15, lw=0, label="P10..P90")
         for name in (res.checkpoints[0].counters_s if res.checkpoints else {}):
             ax.plot(elapsed, [c.counters_s[name] / 60.0 for c in res.checkpoints], "s--", ms=3, lw=0.8,
                     label=f"counter ({name})")

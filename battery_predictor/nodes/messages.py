@@ -74,6 +74,7 @@ def remaining_runtime_msg(status: RuntimeStatus, frame_id: str) -> RemainingRunt
     msg = RemainingRuntime(remaining_s=float(status.remaining_s), assumed_current_a=float(status.assumed_current_a),
                            assumed_temperature_k=float(status.assumed_temperature_k),
                            state_of_charge=float(status.state_of_charge),
+                           remaining_p10_s=float(status.remaining_p10_s), remaining_p90_s=float(status.remaining_p90_s),
                            cutoff_voltage_v=float(status.cutoff_voltage_v), valid=bool(status.valid),
                            status=int(status.status), reason=str(status.reason))
     msg.header.stamp = s_to_stamp(status.stamp_s)
@@ -134,6 +135,9 @@ def fill_route_response(response: CanAcceptRoute.Response, decision: RouteDecisi
     response.route_duration_s = float(decision.route_duration_s)
     response.route_charge_ah = float(decision.route_charge_ah)
     response.state_of_charge = float(decision.state_of_charge)
+    response.probability_above_threshold = float(decision.probability_above_threshold)
+    response.voltage_at_risk_v = float(decision.voltage_at_risk_v)
+    response.risk = float(decision.risk)
     response.reason = str(decision.reason) or ("accepted" if decision.accepted else "rejected")
     return response
 
@@ -244,7 +248,7 @@ def fill_plan_route_response(response: PlanRoute.Response, plan: RoutePlan, thre
     if route is None:
         response.accepted = False
         for attr in ("length_m", "predicted_voltage_v", "margin_v", "route_duration_s", "route_charge_ah",
-                     "state_of_charge"):
+                     "state_of_charge", "probability_above_threshold", "voltage_at_risk_v", "risk"):
             setattr(response, attr, math.nan)
     else:
         d = route.decision
@@ -258,12 +262,17 @@ def fill_plan_route_response(response: PlanRoute.Response, plan: RoutePlan, thre
         response.route_duration_s = float(d.route_duration_s)
         response.route_charge_ah = float(d.route_charge_ah)
         response.state_of_charge = float(d.state_of_charge)
+        response.probability_above_threshold = float(d.probability_above_threshold)
+        response.voltage_at_risk_v = float(d.voltage_at_risk_v)
+        response.risk = float(d.risk)
     response.alternatives = [
         PlannedRoute(kind=ROUTE_KIND_CODES[a.kind], feasible=bool(a.feasible), nodes=list(a.nodes),
                      sections=route_section_msgs(a.sections), length_m=float(a.length_m),
                      predicted_voltage_v=float(a.decision.predicted_voltage_v), margin_v=float(a.decision.margin_v),
                      route_duration_s=float(a.decision.route_duration_s),
                      route_charge_ah=float(a.decision.route_charge_ah), required_soc=float(a.required_soc),
+                     probability_above_threshold=float(a.decision.probability_above_threshold),
+                     voltage_at_risk_v=float(a.decision.voltage_at_risk_v), risk=float(a.decision.risk),
                      reason=str(a.reason)) for a in plan.alternatives]
     response.reason = str(plan.reason) or ("accepted" if response.accepted else "rejected")
     return response

@@ -23,9 +23,18 @@ from battery_predictor.prediction.calibration import Calibration, calibrate_on_h
 from battery_predictor.prediction.cell_runner import PackRunner
 from battery_predictor.prediction.load_estimate import LoadEstimator, LoadKind
 from battery_predictor.prediction.pack_model import pack_model
-from battery_predictor.prediction.route import RouteDecision, evaluate_route, rejected
-from battery_predictor.prediction.runtime import predict_remaining_runtime
+from battery_predictor.prediction.route import RouteDecision, rejected
+from battery_predictor.prediction.runtime import RuntimePrediction, predict_remaining_runtime
 from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v, unexplained_jump_v
+from battery_predictor.prediction.uncertainty import (
+    LoadAhead,
+    Spread,
+    evaluate_route_at_risk,
+    future_load_sigma,
+    interval,
+    runtime_spread,
+    uncertainty_model,
+)
 
 # Status codes, identical to battery_predictor_msgs/RemainingRuntime constants.
 STATUS_OK = 0
@@ -110,6 +119,11 @@ class PredictorConfig:
         Between full calibrations (at most this far apart, s) the calibrated state is propagated
         with the measured current (charge counting through the model), which is more reliable
         than a voltage calibration under load on a flat OCV (LiFePO4).
+    route_risk : float
+        Accepted probability that the pack ends a route below its threshold (0 < risk <= 0.5): a
+        route is accepted when the voltage the pack stays above with probability ``1 - risk``
+        is at or above the threshold (default 0.1: the P10 voltage). 0.5 decides on the P50
+        voltage, as the paper. See :mod:`.uncertainty`.
     """
 
     params_file: str
@@ -132,6 +146,7 @@ class PredictorConfig:
     peak_source: str = "window"
     peak_duration_s: float = 1.0
     simulator: str = "auto"
+    route_risk: float = 0.1
 
 
 #: What of the average load the runtime keeps constant (``PredictorConfig.load_model``).
@@ -162,6 +177,13 @@ class RuntimeStatus:
     valid: bool
     status: int
     reason: str
+    remaining_p10_s: float = math.nan
+    remaining_p90_s: float = math.nan
+    spread: Spread | None = None
+
+
+#: Floor of the calibrated state's voltage error, V per series cell (a voltage sensor's resolution).
+STATE_VOLTAGE_FLOOR_V_PER_CELL = 0.005
 
 
 class PredictorCore:
@@ -184,6 +206,8 @@ class PredictorCore:
         self._cal: tuple[float, float, Calibration] | None = None  # (stamp, full-calibration stamp, cal)
         if config.load_model not in LOAD_MODELS:
             raise ValueError(f"load_model {config.load_model!r} is not one of {', '.join(LOAD_MODELS)}")
+        if not 0.0 < config.route_risk <= 0.5:
+            raise ValueError(f"route_risk must be in (0, 0.5], got {config.route_risk}")
         self._load = LoadEstimator(config.charge_current_a, config.charge_session_s, config.load_estimator,
                                    config.load_time_constant_s)
         #: Why the next calibration must start afresh ("" = it may continue the last one).
@@ -207,6 +231,9 @@ class PredictorCore:
         self.default_temperature_k = _pick(config.default_temperature_k,
                                            self.params.ambient_temperature_k if self.params else None, 298.15)
         series = self.params.series if self.params else 1
+        self.uncertainty = uncertainty_model(self.params.provenance if self.params else {}, series,
+                                             self.default_temperature_k if not self.params
+                                             else self.params.ambient_temperature_k)
         self.state_tolerance_v = config.state_tolerance_v_per_cell * series
         self.jump_tolerance_v = config.jump_tolerance_v_per_cell * series
         self._resistance_cache: dict[int, float] = {}
@@ -394,6 +421,11 @@ class PredictorCore:
         soc, soc_note = published_soc(pred.calibration.soc)
         notes = [n for n in (soc_note, f"calibration {pred.calibration.clipped}" if pred.calibration.clipped else "")
                  if n]
+        undecided = (0.0 if kind.exponent >= 0.5 else 1.0) if self.config.load_model == "auto" and not kind.decided \
+            else None
+        mean_power = load.mean_power_w if math.isfinite(load.mean_power_w) and load.mean_power_w > 0 else 0.0
+        spread = self._runtime_spread(pred, LoadAhead(avg, mean_power, kind.exponent if power else 0.0, math.nan,
+                                                      undecided), v)
         note = "; " + "; ".join(notes) if notes else ""
         peaks = f" with {peak:.2f} A peaks" if pred.limited_by == "peak_cutoff" else ""
         load_text = _load_text(avg, power, kind, pred.assumed_current_a)
@@ -403,9 +435,40 @@ class PredictorCore:
                                  f"simulated){note}")
         if pred.limited_by == "peak_cutoff" and pred.remaining_s == 0.0:
             note = f"; a {peak:.2f} A load peak now would reach the cut-off{note}"
-        reason = (f"{pred.remaining_s / 60:.1f} min at {load_text}{peaks}, {temp - 273.15:.1f} degC until "
+        p10, p90 = interval(pred.remaining_s, *spread.total()) if spread is not None else (math.nan, math.nan)
+        band = f" (P10..P90 {p10 / 60:.1f}..{p90 / 60:.1f} min)" if spread is not None else ""
+        reason = (f"{pred.remaining_s / 60:.1f} min{band} at {load_text}{peaks}, {temp - 273.15:.1f} degC until "
                   f"{cutoff:.2f} V ({pred.limited_by}){note}")
-        return RuntimeStatus(stamp, pred.remaining_s, avg, temp, soc, cutoff, True, STATUS_OK, reason)
+        return RuntimeStatus(stamp, pred.remaining_s, avg, temp, soc, cutoff, True, STATUS_OK, reason, p10, p90,
+                             spread)
+
+    def state_voltage_sigma_v(self, calibration: Calibration | None = None) -> float:
+        """Pack-voltage error of a calibrated state, V: its residual, at least a sensor's resolution.
+
+        Without a calibration (a rested pack at a given SOC), the resolution alone.
+        """
+        floor = STATE_VOLTAGE_FLOOR_V_PER_CELL * (self.params.series if self.params else 1)
+        if calibration is None or not math.isfinite(calibration.latest_residual_v):
+            return floor
+        residual = abs(calibration.latest_residual_v)
+        return max(residual, floor)
+
+    def _runtime_spread(self, pred: RuntimePrediction, load: LoadAhead, voltage_v: float) -> Spread | None:
+        """The P10..P90 deviations of ``pred`` (None when it has no end within the horizon or the model fails)."""
+        if not math.isfinite(pred.average_end_s):
+            return None
+        with self._lock:
+            stamps = np.fromiter(self._load.stamps, float)
+            currents = np.fromiter(self._load.currents, float)
+            voltages = np.fromiter(self._load.voltages, float)
+        demand = currents * voltages ** load.exponent if load.exponent > 0 else currents
+        sigma = future_load_sigma(stamps, demand, pred.average_end_s)
+        load = replace(load, sigma=sigma if math.isfinite(sigma) else 0.0)
+        try:
+            return runtime_spread(self.runner, pred.calibration.start, pred.calibration.soc, pred, load,
+                                  self.uncertainty, self.state_voltage_sigma_v(pred.calibration), voltage_v)
+        except BatteryPredictorError:
+            return None
 
     def _load_kind(self, resistance_ohm: float) -> LoadKind:
         """The load model ahead: the configured kind, or (``"auto"``) the cycle's (call under the lock)."""
@@ -451,8 +514,10 @@ class PredictorCore:
             return rejected(f"the model cannot reproduce the measured {v:.2f} V (off by {cal.latest_residual_v:+.2f} V "
                             f"after calibration, tolerance {self.state_tolerance_v:.2f} V): state uncertain",
                             threshold, soc=soc)
-        decision = evaluate_route(self.runner, cal.start, sections, temp, threshold_v=threshold,
-                                  standstill_current_a=self.standstill_current_a, currents=self._currents)
+        decision = evaluate_route_at_risk(self.runner, cal.start, sections, temp, threshold_v=threshold,
+                                          standstill_current_a=self.standstill_current_a, currents=self._currents,
+                                          risk=self.config.route_risk, model=self.uncertainty,
+                                          state_voltage_sigma_v=self.state_voltage_sigma_v(cal))
         notes = [soc_note] if soc_note else []
         if cal.soc < 0.05 and decision.accepted:
             notes.append("the SOC scale's 0 is the OCV at the params' 0 % point; the pack may be used below it "

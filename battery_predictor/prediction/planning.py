@@ -34,7 +34,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from battery_predictor.errors import BatteryPredictorError, RequestError
-from battery_predictor.prediction.route import RouteDecision, evaluate_route
+from battery_predictor.prediction.route import RouteDecision
+from battery_predictor.prediction.uncertainty import evaluate_route_at_risk
 from battery_predictor.profiles.ranger import (
     DEFAULT_SPEED_M_S,
     DEFAULT_STANDSTILL_S,
@@ -410,8 +411,10 @@ def plan_from_core(core, planner: RoutePlanner, request: PlanRequest, now_s: flo
         capacity = core.runner.capacity_ah
 
         def from_soc(sections, soc):
-            return evaluate_route(core.runner, soc, sections, temp, threshold_v=threshold,
-                                  standstill_current_a=core.standstill_current_a, currents=planner.currents)
+            return evaluate_route_at_risk(core.runner, soc, sections, temp, threshold_v=threshold,
+                                          standstill_current_a=core.standstill_current_a, currents=planner.currents,
+                                          risk=core.config.route_risk, model=core.uncertainty,
+                                          state_voltage_sigma_v=core.state_voltage_sigma_v())
     try:
         return planner.plan(request, decide, from_soc, soc_range, soc_now, capacity)
     except BatteryPredictorError as exc:

@@ -47,6 +47,12 @@ class RouteDecision:
         SOC the prediction started from (NaN when unknown).
     reason : str
         Human-readable reason.
+    probability_above_threshold : float
+        Probability that the voltage after the route is at or above the threshold (NaN when not computed).
+    voltage_at_risk_v : float
+        The voltage after the route that the pack stays above with probability ``1 - risk``, V.
+    risk : float
+        The accepted probability of ending below the threshold (NaN when the decision used the P50 only).
     """
 
     accepted: bool
@@ -57,6 +63,9 @@ class RouteDecision:
     route_charge_ah: float
     state_of_charge: float
     reason: str
+    probability_above_threshold: float = math.nan
+    voltage_at_risk_v: float = math.nan
+    risk: float = math.nan
 
 
 def route_segments(sections: Sequence[RouteSection], standstill_current_a: float,

@@ -40,6 +40,10 @@ class RuntimePrediction:
         Pack voltage threshold in V.
     limited_by : str
         ``"pack_cutoff"`` (average load), ``"peak_cutoff"`` (a load peak), ``"cell_cutoff"`` or ``"horizon"``.
+    average_end_s : float
+        Time in s at which the average load alone reaches the cut-off (NaN beyond the horizon).
+    charge_to_end_ah : float
+        Charge the average load draws until then, Ah.
     """
 
     remaining_s: float
@@ -48,6 +52,8 @@ class RuntimePrediction:
     assumed_temperature_k: float
     cutoff_voltage_v: float
     limited_by: str
+    average_end_s: float = math.nan
+    charge_to_end_ah: float = math.nan
 
 
 def time_to_voltage_s(time_s: np.ndarray, voltage_v: np.ndarray, threshold_v: float) -> float | None:
@@ -171,6 +177,25 @@ def demand_run(runner: PackRunner, start, current_a: float, power_w: float, expo
                           f"in {POWER_PASSES} passes")
 
 
+def run_end_s(run, cutoff_voltage_v: float) -> float | None:
+    """Time (s) at which an average-load run reaches the pack cut-off or a cell's, or None within its horizon."""
+    t_end = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
+    if t_end is None and run.reached_cutoff:
+        t_end = float(run.end_time_s)
+    return t_end
+
+
+def path_charge_ah(path: LoadPath, until_s: float) -> float:
+    """Charge (Ah) the load path draws in its first ``until_s`` s."""
+    return sum(d * i for d, i in path.segments(until_s)) / 3600.0 if until_s > 0 else 0.0
+
+
+def load_horizon_s(runner: PackRunner, soc: float, average_current_a: float) -> float:
+    """Horizon (s) simulated for a load: 1.5 times the charge left at the average current, plus an hour."""
+    charge_left_ah = max(soc - runner.soc_bounds[0], 0.02) * runner.capacity_ah
+    return min(MAX_HORIZON_S, 1.5 * charge_left_ah * 3600.0 / average_current_a + 3600.0)
+
+
 def peak_crossing_s(runner: PackRunner, start, average: LoadPath, peak_factor: float,
                     temperature_k: float, cutoff_voltage_v: float, average_run, *, settle_s: float = 5.0,
                     tolerance_s: float = 30.0, max_runs: int = 16) -> float | None:
@@ -269,20 +294,22 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
     cal = calibration if calibration is not None else calibrate_soc(runner, voltage_v, current_a, temperature_k)
     if voltage_v <= cutoff_voltage_v:
         return RuntimePrediction(0.0, cal, average_current_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
-    charge_left_ah = max(cal.soc - runner.soc_bounds[0], 0.02) * runner.capacity_ah
-    horizon_s = min(MAX_HORIZON_S, 1.5 * charge_left_ah * 3600.0 / average_current_a + 3600.0)
+    horizon_s = load_horizon_s(runner, cal.soc, average_current_a)
     exponent = min(max(float(load_exponent), 0.0), 1.0) if average_power_w is not None else 0.0
     run, path = demand_run(runner, cal.start, average_current_a, average_power_w or 0.0, exponent, horizon_s,
                            temperature_k, voltage_v, cutoff_voltage_v)
     assumed_a = path.current_at(0.0)
+    t_avg = run_end_s(run, cutoff_voltage_v)
+    ends = (t_avg, path_charge_ah(path, t_avg)) if t_avg is not None else (math.nan, math.nan)
     if peak_current_a is not None and peak_current_a > average_current_a:
         t_peak = peak_crossing_s(runner, cal.start, path, float(peak_current_a) / average_current_a, temperature_k,
                                  cutoff_voltage_v, run, settle_s=peak_duration_s)
         if t_peak is not None:
-            return RuntimePrediction(t_peak, cal, assumed_a, temperature_k, cutoff_voltage_v, "peak_cutoff")
+            return RuntimePrediction(t_peak, cal, assumed_a, temperature_k, cutoff_voltage_v, "peak_cutoff", *ends)
     t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
     if t_pack is not None:
-        return RuntimePrediction(t_pack, cal, assumed_a, temperature_k, cutoff_voltage_v, "pack_cutoff")
+        return RuntimePrediction(t_pack, cal, assumed_a, temperature_k, cutoff_voltage_v, "pack_cutoff", *ends)
     if run.reached_cutoff:
-        return RuntimePrediction(run.end_time_s, cal, assumed_a, temperature_k, cutoff_voltage_v, "cell_cutoff")
+        return RuntimePrediction(run.end_time_s, cal, assumed_a, temperature_k, cutoff_voltage_v, "cell_cutoff",
+                                 *ends)
     return RuntimePrediction(horizon_s, cal, assumed_a, temperature_k, cutoff_voltage_v, "horizon")

@@ -155,6 +155,9 @@ class RangerCurrents:
         self._means = {
             slope: np.array([float(np.mean(self.samples_a[(slope, p)])) for p in levels]) for slope in SLOPES
         }
+        self._stds = {
+            slope: np.array([float(np.std(self.samples_a[(slope, p)], ddof=1)) for p in levels]) for slope in SLOPES
+        }
 
     def kde(self, payload_level_kg: float, slope: str) -> BoundedKde:
         """The KDE of one measured (payload level, slope) set."""
@@ -188,6 +191,15 @@ class RangerCurrents:
         check_slope(slope)
         payload = min(max(check_payload_kg(payload_kg), self.payload_levels_kg[0]), self.payload_levels_kg[-1])
         return float(np.interp(payload, self.payload_levels_kg, self._means[slope]))
+
+    def std_current_a(self, payload_kg: float, slope: str) -> float:
+        """Standard deviation in A of the measured currents for ``payload_kg`` (kg) on ``slope``.
+
+        Interpolated between payload levels as :meth:`mean_current_a`.
+        """
+        check_slope(slope)
+        payload = min(max(check_payload_kg(payload_kg), self.payload_levels_kg[0]), self.payload_levels_kg[-1])
+        return float(np.interp(payload, self.payload_levels_kg, self._stds[slope]))
 
     def sample_current_a(self, payload_kg: float, slope: str, size: int, rng: np.random.Generator) -> np.ndarray:
         """Draw ``size`` pack currents in A for ``payload_kg`` on ``slope``."""
@@ -278,6 +290,15 @@ def mean_current_a(payload_kg: float, slope: str, currents: RangerCurrents | Non
     See :meth:`RangerCurrents.mean_current_a`.
     """
     return (currents or _default_currents()).mean_current_a(payload_kg, slope)
+
+
+def std_current_a(payload_kg: float, slope: str, currents: RangerCurrents | None = None) -> float:
+    """Standard deviation in A of the pack currents for ``payload_kg`` (kg) on ``slope``.
+
+    Uses ``currents`` or, by default, the shipped ``ranger_currents.yaml``.
+    See :meth:`RangerCurrents.std_current_a`.
+    """
+    return (currents or _default_currents()).std_current_a(payload_kg, slope)
 
 
 @dataclass(frozen=True)

@@ -53,6 +53,8 @@ def test_remaining_runtime_fields_and_status_constants() -> None:
         "remaining_s": "double",
         "assumed_current_a": "double",
         "assumed_temperature_k": "double",
+        "remaining_p10_s": "double",
+        "remaining_p90_s": "double",
         "state_of_charge": "double",
         "cutoff_voltage_v": "double",
         "valid": "boolean",
@@ -107,6 +109,9 @@ def test_can_accept_route_fields() -> None:
         "route_duration_s": "double",
         "route_charge_ah": "double",
         "state_of_charge": "double",
+        "probability_above_threshold": "double",
+        "voltage_at_risk_v": "double",
+        "risk": "double",
         "reason": "string",
     }
     request = CanAcceptRoute.Request()

@@ -117,3 +117,34 @@ def test_route_decision_matches_the_recorded_truth(name: str, question: str, ros
         assert expected, f"{name} {question}: accepted a route the lab pack could not drive:\n{report}"
         assert response.threshold_voltage_v == pytest.approx(THRESHOLD_V)
         assert response.margin_v >= 0 and response.predicted_voltage_v >= THRESHOLD_V
+        # accepted at the node's risk: the P10 voltage is above the threshold
+        assert response.risk == pytest.approx(0.1) and response.probability_above_threshold >= 0.9
+        assert response.voltage_at_risk_v >= THRESHOLD_V
+    if math.isfinite(response.predicted_voltage_v):
+        assert 0.0 <= response.probability_above_threshold <= 1.0
+
+
+def test_route_probabilities_rank_the_recorded_outcomes(ros_context: Context) -> None:
+    """The further above the threshold the lab pack really ended, the higher the node's probability.
+
+    (Routes the lab pack could not finish reach a cell's cut-off in the model too: rejected without
+    a probability.)
+    """
+    from scipy.stats import spearmanr
+
+    for name in ROUTE_BAGS:
+        if name not in _answers:
+            _answers[name] = _replay(name, ros_context)
+    rows = [(v - THRESHOLD_V, r.probability_above_threshold) for a in _answers.values() for _, v, r in a.values()
+            if math.isfinite(r.probability_above_threshold) and math.isfinite(v)]
+    margins = [m for m, _ in rows]
+    probabilities = [p for _, p in rows]
+    rho = spearmanr(margins, probabilities).statistic
+    brier = sum((p - (m >= 0)) ** 2 for m, p in rows) / len(rows)
+    print(f"route probabilities: {len(rows)} answered, rank correlation with the true margin {rho:.2f}, "
+          f"Brier score {brier:.3f}")
+    assert len(rows) >= 30 and rho > 0.5
+    # at the default risk nothing that ended below the threshold was accepted (checked per question above),
+    # and what is accepted has the probability the risk asks for
+    assert all(p >= 0.9 for a in _answers.values() for _, _, r in a.values() if r.accepted
+               for p in [r.probability_above_threshold])

@@ -19,8 +19,9 @@ from battery_predictor.prediction.planning import (
     RoutePlanner,
     plan_from_core,
 )
-from battery_predictor.prediction.route import RouteDecision, evaluate_route
+from battery_predictor.prediction.route import RouteDecision
 from battery_predictor.prediction.station_services import StationServices, StationServicesConfig
+from battery_predictor.prediction.uncertainty import evaluate_route_at_risk
 from battery_predictor.profiles.ranger import route_from_station
 from battery_predictor.profiles.station import UPHILL, load_station
 
@@ -161,11 +162,13 @@ def test_plans_from_the_core_state(core):
     first = [a for a in knee.alternatives if a.kind == CHARGE_FIRST][0]
     assert first.feasible and first.nodes[:4] == ("platform13_north", "platform13_middle", "platform13_south",
                                                   "charger")
-    # the required SOC is the bisection's: the job from it is accepted, a little below it is not
+    # the required SOC is the bisection's: the job from it is accepted at the node's risk, a little below it is not
     required = first.required_soc
 
     def from_soc(soc):
-        return evaluate_route(core.runner, soc, first.sections, T_K, threshold_v=46.31, standstill_current_a=1.70)
+        return evaluate_route_at_risk(core.runner, soc, first.sections, T_K, threshold_v=46.31, standstill_current_a=1.70,
+                                      risk=core.config.route_risk, model=core.uncertainty,
+                                      state_voltage_sigma_v=core.state_voltage_sigma_v())
 
     assert from_soc(required).accepted
     assert required == 0.0 or not from_soc(required - 2 * SOC_TOLERANCE).accepted
