@@ -362,24 +362,28 @@ def _run_thermal(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nda
                                batch.eps_p, batch.height_m, sub_h, sub_i, table, heat_rate=batch.heat_rate,
                                stride=stride, backend=backend)
     temps = trace.temperature_k
-    lo, hi = TABLE_RANGE_K
-    if not (np.all(np.isfinite(temps)) and np.all((temps > lo) & (temps < hi))):
-        raise SimulationError(f"the lumped cell temperature left {lo:.0f}..{hi:.0f} K")
     if trace.voltages_v is not None:  # the compiled kernel's, PyBaMM's printed voltage expression
-        start_v, end_v = trace.voltages_v
+        start_v, end_v = trace.voltages_v  # NaN after each set's end (the kernel stops there)
     else:
         start_v = _voltage(model, batch, trace.surfaces[:, :-1], sub_i[None, :], temps[:, :-1])
         end_v = _voltage(model, batch, trace.surfaces[:, 1:], sub_i[None, :], temps[:, 1:])
     sub_edges = np.append(sub_start, edges[-1])
-    if not (np.all(np.isfinite(start_v)) and np.all(np.isfinite(end_v))):
-        raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
-    _check_range(start_v, end_v, sub_edges)
     cut = model.lower_cutoff_v
     below = (start_v < cut) | (end_v < cut)
     any_below = below.any(axis=1)
     sub_cut = np.where(any_below, below.argmax(axis=1), owner.size)
     sets = np.arange(n_sets)
     at_start = any_below & (start_v[sets, np.minimum(sub_cut, owner.size - 1)] < cut)
+    # what must be finite: everything up to each set's end
+    cols = np.arange(owner.size)[None, :]
+    if not (np.all(np.isfinite(start_v[cols <= sub_cut[:, None]]))
+            and np.all(np.isfinite(end_v[cols < (sub_cut + ~at_start)[:, None]]))):
+        raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
+    lo, hi = TABLE_RANGE_K
+    valid_t = temps[np.arange(owner.size + 1)[None, :] <= (sub_cut + ~at_start)[:, None]]
+    if not (np.all(np.isfinite(valid_t)) and np.all((valid_t > lo) & (valid_t < hi))):
+        raise SimulationError(f"the lumped cell temperature left {lo:.0f}..{hi:.0f} K")
+    _check_range(start_v, end_v, sub_edges)
     end_time = np.full(n_sets, edges[-1])
     end_time[at_start] = sub_edges[sub_cut[at_start]]
     final_t = temps[:, -1].copy()

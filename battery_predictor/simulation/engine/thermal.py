@@ -192,7 +192,9 @@ class ThermalTrace:
         ``"numba"`` or ``"numpy"``.
     voltages_v : tuple of numpy.ndarray or None
         Cell voltage (V) at every step start and end under the step's current, (n_sets, n_steps)
-        each, when the compiled kernel evaluated them (else the caller evaluates the voltage).
+        each, when the compiled kernel evaluated them (else the caller evaluates the voltage). The
+        kernel stops a set at the first voltage below the cut-off: its later voltages, surfaces and
+        temperatures are NaN (and its kept states and ``z_end`` stop there too).
     """
 
     surfaces: np.ndarray
@@ -267,7 +269,7 @@ def thermal_recurrence(model, modal, lam: np.ndarray, drive: np.ndarray, z0: np.
 
         try:
             return _recurrence_numba(kernel, modal, lam, drive, z0, temperature0_k, ambient_k, eps_n, eps_p, height_m,
-                                     duration_s, current_a, table, stride, heat_rate)
+                                     duration_s, current_a, table, stride, heat_rate, model.lower_cutoff_v)
         except NumbaError as exc:
             LOG.warning("engine: the thermal kernel does not compile for this model (%s); using NumPy",
                         str(exc).splitlines()[0])
@@ -322,7 +324,8 @@ def _recurrence_numpy(model, modal, lam, drive, z0, temperature0_k, ambient_k, e
 
 
 def _recurrence_numba(kernel, modal, lam, drive, z0, temperature0_k, ambient_k, eps_n, eps_p, height_m, duration_s,
-                      current_a, table: DiffusivityTemperature, stride: int, heat_rate: np.ndarray) -> ThermalTrace:
+                      current_a, table: DiffusivityTemperature, stride: int, heat_rate: np.ndarray,
+                      cutoff_v: float) -> ThermalTrace:
     n_sets, n_modes = z0.shape
     n_steps = duration_s.size
     surfaces = np.empty((n_sets, n_steps + 1, 2))
@@ -337,7 +340,7 @@ def _recurrence_numba(kernel, modal, lam, drive, z0, temperature0_k, ambient_k, 
     kernel(c(lam), c(drive), c(z0), c(np.asarray(temperature0_k, dtype=float)), c(np.asarray(ambient_k, dtype=float)),
            c(eps_n), c(eps_p), c(height_m), c(heat_rate), c(duration_s), c(current_a), c(modal.surface_weights),
            int(modal.n_negative), table.inverse_start_per_k, table.inverse_step_per_k, c(table.ln_factor), bool(table.constant),
-           int(stride), surfaces, temps, factors, states, z_end, start_v, end_v)
+           int(stride), surfaces, temps, factors, states, z_end, start_v, end_v, float(cutoff_v))
     voltages = (start_v, end_v) if has_voltage else None
     return ThermalTrace(surfaces=surfaces, temperature_k=temps, diffusivity_factor=factors, states=states,
                         stride=stride, z_end=z_end, backend="numba", voltages_v=voltages)
@@ -370,7 +373,7 @@ def compile_thermal_kernel(numba, rate_source: str, voltage_source: str, paralle
     def kernel(lam, drive, z0, temperature0_k, ambient_k, eps_n, eps_p, height_m, heat_rate, duration_s, current_a,
                weights,
                n_neg, inv0, dinv, ln_factor, constant, stride, surfaces, temps, factors, states,
-               z_end, start_v, end_v):  # pragma: no cover - compiled
+               z_end, start_v, end_v, cutoff_v):  # pragma: no cover - compiled
         n_sets, n_modes = z0.shape
         n_steps = duration_s.shape[0]
         n_grid = ln_factor.shape[1]
@@ -393,9 +396,15 @@ def compile_thermal_kernel(numba, rate_source: str, voltage_source: str, paralle
             last_h = -1.0
             if has_voltage and n_steps > 0:
                 start_v[s, 0] = voltage(sn, sp, current_a[0], t, en, ep, hh)
+            # a voltage below the cut-off ends the set: what follows is NaN (first start voltage, end
+            # voltage and boundary that are past the end; n_steps / n_steps + 1 when it runs to the end)
+            nan_start, nan_end, nan_boundary = n_steps, n_steps, n_steps + 1
             for k in range(n_steps):
                 h = duration_s[k]
                 i = current_a[k]
+                if has_voltage and not start_v[s, k] >= cutoff_v:
+                    nan_start, nan_end, nan_boundary = k + 1, k, k + 1
+                    break
                 r0 = f_rate * rate(sn, sp, i, t, en, ep, hh, t_amb)
                 g_n = 1.0
                 g_p = 1.0
@@ -441,6 +450,17 @@ def compile_thermal_kernel(numba, rate_source: str, voltage_source: str, paralle
                 if (k + 1) % stride == 0:
                     for j in range(n_modes):
                         states[s, (k + 1) // stride, j] = z[j]
+                if has_voltage and not end_v[s, k] >= cutoff_v:
+                    nan_start, nan_end, nan_boundary = k + 1, k + 1, k + 2
+                    break
+            for kk in range(nan_start, n_steps):
+                start_v[s, kk] = math.nan
+            for kk in range(nan_end, n_steps):
+                end_v[s, kk] = math.nan
+            for kk in range(nan_boundary, n_steps + 1):
+                surfaces[s, kk, 0] = math.nan
+                surfaces[s, kk, 1] = math.nan
+                temps[s, kk] = math.nan
             for j in range(n_modes):
                 z_end[s, j] = z[j]
 
