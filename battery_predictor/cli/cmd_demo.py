@@ -117,10 +117,10 @@ def _feasible_tasks(session, at_min: float) -> list[str]:
              "accepted; the walk back to the charger must stay above the cut-off):"]
     if not r.valid:
         lines.append(f"   not valid: {r.reason}")
-    lines.append(f"   {'task':<28} {'min':>5} {'V at end':>9} {'margin':>8} {'left after':>11}  feasible")
+    lines.append(f"   {'task':<28} {'min':>5} {'V at end':>9} {'margin':>8} {'left after':>11} {'P(ok)':>6}  feasible")
     for t in r.results:
         lines.append(f"   {t.name:<28} {t.duration_s / 60:>5.1f} {t.end_voltage_v:>7.2f} V {t.margin_v:>+6.2f} V "
-                     f"{t.remaining_after_s / 60:>7.0f} min  {'yes' if t.feasible else 'no'}")
+                     f"{t.remaining_after_s / 60:>7.0f} min {t.probability_feasible:>6.3f}  {'yes' if t.feasible else 'no'}")
     lines.append(f'   the robot says: "{r.summary}"')
     lines.append(f"   ({r.reason})")
     return lines

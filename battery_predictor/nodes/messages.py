@@ -210,7 +210,8 @@ def fill_feasible_tasks_response(response: FeasibleTasks.Response, plan: TaskPla
                                    duration_s=float(o.duration_s), current_a=float(o.current_a),
                                    end_voltage_v=float(o.end_voltage_v), return_voltage_v=float(o.return_voltage_v),
                                    margin_v=float(o.margin_v), remaining_after_s=float(o.remaining_after_s),
-                                   end_location=str(o.end_location), reason=str(o.reason) or
+                                   end_location=str(o.end_location),
+                                   probability_feasible=float(o.probability_feasible), reason=str(o.reason) or
                                    ("feasible" if o.feasible else "not feasible"))
                         for o in plan.outcomes]
     response.feasible_count = int(plan.feasible_count)

@@ -266,11 +266,11 @@ class PredictorNode(Node):
             peak_duration_s=declare_float(self, "peak_duration_s", _core_default("peak_duration_s"),
                                           "How long a sample peak lasts in the model, s (peak_source 'sample').",
                                           0.01, 60.0),
-            route_risk=declare_float(
-                self, "route_risk", _core_default("route_risk"),
-                "Accepted probability that a route ends below its threshold: accepted only when the voltage the "
-                "pack stays above with probability 1 - route_risk is at or above it (0.1 = the P10 voltage; "
-                "0.5 = the P50, as the paper).", 0.001, 0.5),
+            decision_risk=declare_float(
+                self, "decision_risk", _core_default("decision_risk"),
+                "Accepted probability that a route (or a task with the walk back to the charger) ends below its "
+                "threshold: accepted only when the voltage the pack stays above with probability 1 - decision_risk "
+                "is at or above it (0.1 = the P10 voltage; 0.5 = the P50, as the paper).", 0.001, 0.5),
             simulator=declare_str(self, "simulator", PredictorConfig.simulator,
                                   "Pack model: 'auto' (the SPM engine unless the params activate extensions, then "
                                   "PyBaMM's solver), 'engine' or 'pybamm'.", BACKENDS),

@@ -119,11 +119,11 @@ class PredictorConfig:
         Between full calibrations (at most this far apart, s) the calibrated state is propagated
         with the measured current (charge counting through the model), which is more reliable
         than a voltage calibration under load on a flat OCV (LiFePO4).
-    route_risk : float
-        Accepted probability that the pack ends a route below its threshold (0 < risk <= 0.5): a
-        route is accepted when the voltage the pack stays above with probability ``1 - risk``
-        is at or above the threshold (default 0.1: the P10 voltage). 0.5 decides on the P50
-        voltage, as the paper. See :mod:`.uncertainty`.
+    decision_risk : float
+        Accepted probability that the pack ends a route (or a task and the walk back to the
+        charger) below its threshold (0 < risk <= 0.5): accepted when the voltage the pack stays
+        above with probability ``1 - risk`` is at or above the threshold (default 0.1: the P10
+        voltage). 0.5 decides on the P50 voltage, as the paper. See :mod:`.uncertainty`.
     """
 
     params_file: str
@@ -146,7 +146,7 @@ class PredictorConfig:
     peak_source: str = "window"
     peak_duration_s: float = 1.0
     simulator: str = "auto"
-    route_risk: float = 0.1
+    decision_risk: float = 0.1
 
 
 #: What of the average load the runtime keeps constant (``PredictorConfig.load_model``).
@@ -206,8 +206,8 @@ class PredictorCore:
         self._cal: tuple[float, float, Calibration] | None = None  # (stamp, full-calibration stamp, cal)
         if config.load_model not in LOAD_MODELS:
             raise ValueError(f"load_model {config.load_model!r} is not one of {', '.join(LOAD_MODELS)}")
-        if not 0.0 < config.route_risk <= 0.5:
-            raise ValueError(f"route_risk must be in (0, 0.5], got {config.route_risk}")
+        if not 0.0 < config.decision_risk <= 0.5:
+            raise ValueError(f"decision_risk must be in (0, 0.5], got {config.decision_risk}")
         self._load = LoadEstimator(config.charge_current_a, config.charge_session_s, config.load_estimator,
                                    config.load_time_constant_s)
         #: Why the next calibration must start afresh ("" = it may continue the last one).
@@ -516,7 +516,7 @@ class PredictorCore:
                             threshold, soc=soc)
         decision = evaluate_route_at_risk(self.runner, cal.start, sections, temp, threshold_v=threshold,
                                           standstill_current_a=self.standstill_current_a, currents=self._currents,
-                                          risk=self.config.route_risk, model=self.uncertainty,
+                                          risk=self.config.decision_risk, model=self.uncertainty,
                                           state_voltage_sigma_v=self.state_voltage_sigma_v(cal))
         notes = [soc_note] if soc_note else []
         if cal.soc < 0.05 and decision.accepted:

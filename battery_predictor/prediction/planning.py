@@ -413,7 +413,7 @@ def plan_from_core(core, planner: RoutePlanner, request: PlanRequest, now_s: flo
         def from_soc(sections, soc):
             return evaluate_route_at_risk(core.runner, soc, sections, temp, threshold_v=threshold,
                                           standstill_current_a=core.standstill_current_a, currents=planner.currents,
-                                          risk=core.config.route_risk, model=core.uncertainty,
+                                          risk=core.config.decision_risk, model=core.uncertainty,
                                           state_voltage_sigma_v=core.state_voltage_sigma_v())
     try:
         return planner.plan(request, decide, from_soc, soc_range, soc_now, capacity)

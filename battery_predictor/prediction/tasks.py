@@ -11,7 +11,11 @@ the pack model (the SPM engine where it covers the params), followed by the walk
 task ends to the charger at a high navigation current (the 0.9 quantile of the measured
 navigation currents, :data:`RETURN_CURRENT_QUANTILE`). A task is feasible when no simulated
 voltage of the task and of that walk falls below the cut-off; it errs toward "no": a walk
-without a destination is assumed to end at the map's node farthest from the charger.
+without a destination is assumed to end at the map's node farthest from the charger. With a
+:class:`TaskRisk` (the predictor's ``decision_risk``), the lowest voltage must stay above the
+cut-off with probability ``1 - risk`` (:mod:`.uncertainty`: the model's voltage error, the
+calibrated state's, a task current left to the usage model drawn from its distribution, the
+parameters'); each answer gives that probability.
 
 Policies (:data:`POLICIES`):
 
@@ -27,7 +31,7 @@ Policies (:data:`POLICIES`):
 The summary a robot can say counts guided walks (to the map's farthest destination from the
 robot and back, at the mean navigation current) and minutes of information (at the mean
 information current) from the present state, each keeping the walk back to the charger; both are
-rounded down.
+rounded down, and both are the median answer ("about").
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ import numpy as np
 
 from battery_predictor.errors import BatteryPredictorError, RequestError
 from battery_predictor.prediction.runtime import MAX_HORIZON_S, time_to_voltage_s
+from battery_predictor.prediction.uncertainty import UncertaintyModel, route_spread
 from battery_predictor.profiles.station import Station
 from battery_predictor.profiles.temi import INFORMATION, NAVIGATION, TemiUsageConfig
 
@@ -150,19 +155,45 @@ class TaskLoads:
         Current of the walk back to the charger, A (a high quantile of the navigation currents).
     speed_m_s : float
         Walking speed, m/s (paper: 0.90 m/s).
+    information_std_a, navigation_std_a : float
+        Standard deviation of the measured currents of each kind, A: the usage model draws one
+        current per interaction, so a task's mean current is one such draw.
     """
 
     information_current_a: float
     navigation_current_a: float
     return_current_a: float
     speed_m_s: float
+    information_std_a: float = 0.0
+    navigation_std_a: float = 0.0
 
     @classmethod
     def from_usage(cls, config: TemiUsageConfig, speed_m_s: float) -> TaskLoads:
         """From the information robot's usage model (``temi_usage.yaml``) and its speed (m/s)."""
         nav = np.asarray(config.current_samples_a[NAVIGATION], dtype=float)
+        info = np.asarray(config.current_samples_a[INFORMATION], dtype=float)
         return cls(config.current_distribution(INFORMATION).mean, config.current_distribution(NAVIGATION).mean,
-                   float(np.quantile(nav, RETURN_CURRENT_QUANTILE)), float(speed_m_s))
+                   float(np.quantile(nav, RETURN_CURRENT_QUANTILE)), float(speed_m_s),
+                   float(np.std(info, ddof=1)), float(np.std(nav, ddof=1)))
+
+
+@dataclass(frozen=True)
+class TaskRisk:
+    """How sure a feasible answer must be.
+
+    Attributes
+    ----------
+    risk : float
+        Accepted probability that the lowest voltage falls below the cut-off (0.5 = the median).
+    model : UncertaintyModel
+        Spreads of the params.
+    state_voltage_sigma_v : float
+        Pack-voltage error of the calibrated state, V.
+    """
+
+    risk: float
+    model: UncertaintyModel
+    state_voltage_sigma_v: float
 
 
 @dataclass(frozen=True)
@@ -193,6 +224,9 @@ class TaskOutcome:
         Where the task ends ("" when unknown).
     reason : str
         Why, in one line.
+    probability_feasible : float
+        Probability that the lowest voltage stays at or above the cut-off (NaN without a :class:`TaskRisk`
+        or when not evaluated).
     """
 
     name: str
@@ -206,6 +240,7 @@ class TaskOutcome:
     remaining_after_s: float = math.nan
     end_location: str = ""
     reason: str = ""
+    probability_feasible: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -279,11 +314,14 @@ class TaskPlanner:
         Temperature assumed, K.
     average_current_a : float
         Present cycle's average load, A (for the remaining time after a task).
+    risk : TaskRisk, optional
+        Decide at this risk (default: on the median voltages).
     """
 
     def __init__(self, runner, station: Station, charger: str, loads: TaskLoads, cutoff_voltage_v: float,
-                 temperature_k: float, average_current_a: float) -> None:
+                 temperature_k: float, average_current_a: float, risk: TaskRisk | None = None) -> None:
         self.runner = runner
+        self.risk = risk
         self.station = station
         self.charger = station.check_node(charger)
         self.loads = loads
@@ -381,14 +419,38 @@ class TaskPlanner:
         walk = self.return_m(end)
         where = end or f"an unknown place (assumed {self._far_node})"
         feasible = ok_task and ok_back
+        probability, risk_note = math.nan, ""
+        if self.risk is not None and feasible:
+            after = back.final_state if ret and back.final_state is not None else state
+            probability, at_risk_v = self._at_risk(start, after, task, duration, segments + ret, low)
+            feasible = at_risk_v >= self.cutoff_voltage_v
+            risk_note = (f"; probability above the cut-off {probability:.3f}, P{100 * self.risk.risk:.0f} lowest "
+                         f"voltage {at_risk_v:.2f} V (accepted risk {self.risk.risk:.2f})")
         verdict = "feasible" if feasible else "not feasible"
         reason = (f"{verdict}: {duration / 60:.1f} min at {mean_a:.2f} A ends at {v_end:.2f} V; the {walk:.0f} m walk "
                   f"back to the {self.charger} from {where} at {self.loads.return_current_a:.2f} A ends at "
                   + (f"{v_back:.2f} V" if math.isfinite(v_back) else "a cell cut-off")
                   + f", cut-off {self.cutoff_voltage_v:.2f} V, margin "
-                  + (f"{margin:+.2f} V" if math.isfinite(margin) else "none"))
+                  + (f"{margin:+.2f} V" if math.isfinite(margin) else "none") + risk_note)
         return (TaskOutcome(**base, feasible=feasible, end_voltage_v=v_end, return_voltage_v=v_back, margin_v=margin,
-                            remaining_after_s=remaining, reason=reason), state, end)
+                            remaining_after_s=remaining, reason=reason, probability_feasible=probability), state, end)
+
+    def _at_risk(self, start, after, task: Task, task_s: float, segments, low_v: float) -> tuple[float, float]:
+        """(probability that the lowest voltage stays above the cut-off, the lowest voltage at the risk), V."""
+        soc0 = self.runner.soc_of(start) if not isinstance(start, (int, float)) else float(start)
+        charge_ah = sum(d * i for d, i in segments) / 3600.0
+        std_a = 0.0
+        if not task.profile and not math.isfinite(task.current_a):  # the usage model's current: one draw
+            std_a = self.loads.navigation_std_a if task.kind == NAVIGATION else self.loads.information_std_a
+        charge_sigma_ah = task_s / 3600.0 * std_a
+
+        def lowest_at(temperature_k: float) -> float:
+            run = self.runner.run(start, segments, temperature_k)
+            return math.nan if run.reached_cutoff else float(np.min(run.pack_voltage_v))
+
+        spread = route_spread(self.runner, soc0, self.runner.soc_of(after), charge_ah, charge_sigma_ah,
+                              self.temperature_k, self.risk.model, self.risk.state_voltage_sigma_v, lowest_at)
+        return spread.probability_above(low_v - self.cutoff_voltage_v), spread.voltage_at_risk_v(low_v, self.risk.risk)
 
     def max_time_s(self, start, location: str, current_a: float) -> float:
         """Longest time (s) at ``current_a`` from ``start`` that still leaves the walk back (to
@@ -528,7 +590,8 @@ def feasible_tasks(core, tasks: Sequence[Task], location: str, policy: str, now_
         if not (math.isfinite(average) and average > 0):
             average = fallback_current_a
             load_note = f"no discharge load in the present cycle yet: the usage model's mean {average:.2f} A"
-        planner = TaskPlanner(core.runner, station, charger, loads, cutoff, temp, average)
+        risk = TaskRisk(core.config.decision_risk, core.uncertainty, core.state_voltage_sigma_v(cal))
+        planner = TaskPlanner(core.runner, station, charger, loads, cutoff, temp, average, risk)
         plan = planner.evaluate(cal.start, location, tasks, policy)
     except BatteryPredictorError as exc:
         return invalid_plan(tasks, policy, f"invalid request: {exc}" if isinstance(exc, RequestError)

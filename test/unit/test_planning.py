@@ -167,7 +167,7 @@ def test_plans_from_the_core_state(core):
 
     def from_soc(soc):
         return evaluate_route_at_risk(core.runner, soc, first.sections, T_K, threshold_v=46.31, standstill_current_a=1.70,
-                                      risk=core.config.route_risk, model=core.uncertainty,
+                                      risk=core.config.decision_risk, model=core.uncertainty,
                                       state_voltage_sigma_v=core.state_voltage_sigma_v())
 
     assert from_soc(required).accepted

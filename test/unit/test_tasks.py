@@ -21,6 +21,7 @@ from battery_predictor.prediction.tasks import (
     Task,
     TaskLoads,
     TaskPlanner,
+    TaskRisk,
     feasible_tasks,
 )
 from battery_predictor.profiles.station import load_station
@@ -180,3 +181,28 @@ def test_answers_from_the_core_state(core, task_map, loads):
     swapped.runner = None
     swapped.model_error = "broken"
     assert "no usable pack model: broken" in ask(swapped).reason
+
+
+def test_a_task_with_a_thin_margin_is_feasible_on_its_median_but_not_at_the_default_risk(core, task_map, loads):
+    """With the predictor's risk (P10 of the lowest voltage) a task whose median margin is inside the spread is refused."""
+    p50 = planner(core, task_map, loads)
+    start = 0.3
+    t_max = p50.max_time_s(start, "entrance", loads.information_current_a)
+    task = Task("talk", "information", t_max - 60.0)  # the median leaves about a minute of information
+    median = p50.try_task(start, "entrance", task)[0]
+    assert median.feasible and math.isnan(median.probability_feasible)
+    risk = TaskRisk(0.1, core.uncertainty, core.state_voltage_sigma_v())
+    at_risk = TaskPlanner(core.runner, task_map, "charger", loads, 13.30, T_K, 1.8, risk).try_task(start, "entrance",
+                                                                                                   task)[0]
+    assert not at_risk.feasible and 0.5 <= at_risk.probability_feasible < 0.9
+    assert "probability above the cut-off" in at_risk.reason and at_risk.reason.startswith("not feasible")
+    short = Task("hello", "information", 60.0)
+    sure = TaskPlanner(core.runner, task_map, "charger", loads, 13.30, T_K, 1.8, risk).try_task(start, "entrance",
+                                                                                                short)[0]
+    assert sure.feasible and sure.probability_feasible >= 0.9
+
+
+def test_task_current_spread_comes_from_the_usage_model(loads):
+    usage = load_usage_config()
+    assert loads.information_std_a == pytest.approx(np.std(usage.current_samples_a["information"], ddof=1))
+    assert loads.navigation_std_a > 0

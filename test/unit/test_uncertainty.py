@@ -127,7 +127,7 @@ def ranger_params():
 
 
 def fed(params, voltage_v: float, risk: float = 0.1) -> PredictorCore:
-    core = PredictorCore(PredictorConfig(params_file=str(params.source), route_risk=risk), params=params)
+    core = PredictorCore(PredictorConfig(params_file=str(params.source), decision_risk=risk), params=params)
     for k in range(40):
         core.update_state(1000.0 + 5 * k, voltage_v, 3.0, 298.15)
     return core
@@ -141,7 +141,7 @@ def test_a_route_with_a_thin_margin_is_accepted_on_its_median_but_rejected_at_th
     thin = PredictorCore(PredictorConfig(params_file=str(ranger_params.source), route_min_voltage_v=threshold),
                          params=ranger_params)
     paper = PredictorCore(PredictorConfig(params_file=str(ranger_params.source), route_min_voltage_v=threshold,
-                                          route_risk=0.5), params=ranger_params)
+                                          decision_risk=0.5), params=ranger_params)
     for c in (thin, paper):
         for k in range(40):
             c.update_state(1000.0 + 5 * k, 49.8, 3.0, 298.15)
@@ -153,10 +153,10 @@ def test_a_route_with_a_thin_margin_is_accepted_on_its_median_but_rejected_at_th
     assert median.accepted and median.probability_above_threshold > 0.99 and median.risk == 0.1
 
 
-def test_route_risk_outside_its_range_is_refused(ranger_params):
+def test_decision_risk_outside_its_range_is_refused(ranger_params):
     for risk in (0.0, 0.7, math.nan):
-        with pytest.raises(ValueError, match="route_risk"):
-            PredictorCore(PredictorConfig(params_file=str(ranger_params.source), route_risk=risk), params=ranger_params)
+        with pytest.raises(ValueError, match="decision_risk"):
+            PredictorCore(PredictorConfig(params_file=str(ranger_params.source), decision_risk=risk), params=ranger_params)
 
 
 def test_runtime_carries_an_interval_around_its_median():
