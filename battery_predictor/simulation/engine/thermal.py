@@ -19,16 +19,20 @@ diffusivity over its value at the ambient temperature), then the temperature by 
 (explicit trapezoid) on PyBaMM's heat equation,
 ``T_{k+1} = T_k + h/2 (f(s_k, I, T_k) + f(s_{k+1}, I, T_k + h f(s_k, I, T_k)))``.
 Steps longer than :data:`MAX_THERMAL_STEP_S` are split into equal sub-steps (exact for the
-particles, a shorter step for the temperature). Inside a step the temperature is taken linear in
-time. The error against PyBaMM's solver is measured in ``test/unit/test_engine_thermal.py``.
+particles, a shorter step for the temperature). Inside a step (reports between step starts, the
+state at a cut-off) the temperature is Heun's step of that length from the step's start; the
+cut-off root itself follows the temperature's Euler line through the step. The error against
+PyBaMM's solver is measured in ``test/unit/test_engine_thermal.py`` (figures in BENCHMARKS.md).
 
 ``g(T)`` is the params' diffusivity function evaluated by PyBaMM on a grid uniform in ``1/T``
 and interpolated linearly in ``(1/T, ln g)``, which is exact for Arrhenius laws; constant
 diffusivities (Chen2020, Prada2013) skip it.
 
-The recurrence runs in a compiled kernel (Numba, the heat equation printed by PyBaMM as in
-:mod:`~battery_predictor.simulation.engine.kernel`) or in NumPy (a loop over steps vectorised over
-the sets, PyBaMM's generated NumPy code for the heat equation).
+The recurrence runs in a compiled kernel (Numba; the heat equation and the voltage printed by
+PyBaMM as in :mod:`~battery_predictor.simulation.engine.kernel`; the voltage at every step start and
+end, each set stopped at its first voltage below the cut-off) or in NumPy (a loop over steps
+vectorised over the sets, PyBaMM's generated NumPy code for the heat equation, the voltage
+afterwards on every boundary; about 200x slower, the path for machines without Numba).
 """
 
 from __future__ import annotations
