@@ -58,8 +58,6 @@ from dataclasses import dataclass, field
 REASONS = ("nan", "out_of_range", "out_of_order", "duplicate", "late", "future")
 #: Reasons that mean the sensor delivers invalid values (diagnostics level ERROR).
 INVALID_REASONS = ("nan", "out_of_range")
-#: Input names: one combined ``BatteryState`` input, or the relay's three topics.
-INPUTS = ("battery_state", "voltage", "current", "temperature")
 #: Input styles of :class:`MonitorConfig`.
 STYLES = ("battery_state", "relay")
 

@@ -5,10 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.figure import Figure
 
 
 def plot_voltage_fit(recordings: Sequence, results: Sequence, path: str | Path, *, title: str,
@@ -27,7 +24,8 @@ def plot_voltage_fit(recordings: Sequence, results: Sequence, path: str | Path, 
         Figure title (carries R2_mod).
     """
     n = len(recordings)
-    fig, axes = plt.subplots(n, 1, figsize=(9, 3.2 * n), squeeze=False)
+    fig = Figure(figsize=(9, 3.2 * n))
+    axes = fig.subplots(n, 1, squeeze=False)
     for k, (rec, res) in enumerate(zip(recordings, results)):
         ax = axes[k, 0]
         ax.plot(rec.relative_time_s / 60.0, rec.voltage_v, color="black", lw=1.2, label="measured")
@@ -42,7 +40,6 @@ def plot_voltage_fit(recordings: Sequence, results: Sequence, path: str | Path, 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 
@@ -59,7 +56,6 @@ def ocv_figure(soc: Sequence[float], measured_v: Sequence[float], model_v: Seque
         Figure title.
     """
     import numpy as np
-    from matplotlib.figure import Figure
 
     fig = Figure(figsize=(8, 5.5))
     top, bottom = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})

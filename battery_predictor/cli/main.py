@@ -34,13 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="battery-predictor", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name == name:
-                continue  # sub-command not implemented in this build
-            raise
-        module.register(sub)
+        importlib.import_module(name).register(sub)
     _record_flags(parser)
     return parser
 

@@ -6,13 +6,10 @@ import json
 import math
 from pathlib import Path
 
-import matplotlib
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-from battery_predictor.evaluation.paper_eval import PAPER  # noqa: E402
-from battery_predictor.jsonutil import json_default  # noqa: E402
+from battery_predictor.evaluation.paper_eval import PAPER
+from battery_predictor.jsonutil import json_default
 
 
 def _fmt(x, nd=2) -> str:
@@ -25,7 +22,8 @@ def fig_fit(rows, dynamic, static, out: Path, base: str = "Chen2020") -> Path | 
                 and r.opt_result is not None), None)
     if row is None:
         return None
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+    fig = Figure(figsize=(11, 3.6))
+    axes = fig.subplots(1, 2)
     for ax, (label, res, rec, score) in zip(axes, (("dynamic (fit)", row.opt_result, dynamic, row.opt_r2_mod),
                                                    ("static (validation)", row.val_result, static,
                                                     row.val_r2_mod))):
@@ -40,13 +38,13 @@ def fig_fit(rows, dynamic, static, out: Path, base: str = "Chen2020") -> Path | 
     fig.suptitle(f"Information robot, {base} fitted on the dynamic discharge (cf. paper Fig. 4)")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
-    plt.close(fig)
     return out
 
 
 def fig_runtime(points, out: Path) -> Path:
     """Fig. 5 kind: predicted vs actual remaining runtime per pack at each checkpoint."""
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig = Figure(figsize=(8, 4))
+    ax = fig.subplots()
     names = list(dict.fromkeys(p.recording for p in points))
     for k, name in enumerate(names):
         sub = [p for p in points if p.recording == name]
@@ -61,13 +59,13 @@ def fig_runtime(points, out: Path) -> Path:
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
-    plt.close(fig)
     return out
 
 
 def fig_stepwise(rec, res, score: float, out: Path) -> Path:
     """Fig. 7 kind: luggage robot stepwise experiment, measured vs fitted model."""
-    fig, ax = plt.subplots(figsize=(9, 3.6))
+    fig = Figure(figsize=(9, 3.6))
+    ax = fig.subplots()
     ax.plot(rec.relative_time_s / 60, rec.voltage_v, "k", lw=1, label="measured")
     ax.plot(res.time_s / 60, res.pack_voltage_v, "r--", lw=1, label="simulated")
     ax.set_ylim(min(rec.voltage_v) - 0.5, max(rec.voltage_v) + 0.5)
@@ -78,13 +76,13 @@ def fig_stepwise(rec, res, score: float, out: Path) -> Path:
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
-    plt.close(fig)
     return out
 
 
 def fig_routes(cases, threshold_v: float, out: Path) -> Path:
     """Fig. 8 kind: predicted vs recorded voltage at 1.70 A after cycle 1 and 2, per payload."""
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig = Figure(figsize=(8, 4))
+    ax = fig.subplots()
     for k, c in enumerate(cases):
         x = [1 + 0.02 * k, 2 + 0.02 * k]
         ax.plot(x, c.actual_v, "o-", color=f"C{int(c.payload_kg) // 20 - 1}", lw=0.8)
@@ -101,7 +99,6 @@ def fig_routes(cases, threshold_v: float, out: Path) -> Path:
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
-    plt.close(fig)
     return out
 
 

@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -33,14 +33,6 @@ def declare_float(node: Node, name: str, default: float, description: str, low: 
     descriptor = ParameterDescriptor(description=description, read_only=read_only, floating_point_range=[
         FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)])
     return float(node.declare_parameter(name, float(default), descriptor).value)
-
-
-def declare_int(node: Node, name: str, default: int, description: str, low: int, high: int, *,
-                read_only: bool = True) -> int:
-    """Declare an integer parameter with an IntegerRange ``[low, high]``; returns its value."""
-    descriptor = ParameterDescriptor(description=description, read_only=read_only, integer_range=[
-        IntegerRange(from_value=int(low), to_value=int(high), step=1)])
-    return int(node.declare_parameter(name, int(default), descriptor).value)
 
 
 def declare_str(node: Node, name: str, default: str, description: str, choices: tuple[str, ...] = (), *,

@@ -5,8 +5,7 @@ string, and Jazzy's generated type support checks bounds only while serialising,
 deserialising, so any client can send a request of many megabytes. Measured on the node started
 by ``battery-predictor run`` (``test/ros/test_route_fuzz.py``): with rmw_fastrtps' defaults one
 50 MB request (500 sections with 100 kB names) left the process 113 MB larger for good (415 ->
-528 MB), as the million-section requests of issue 13 did before the section bound (394 -> 687 MB).
-Two things keep it:
+528 MB). Two things keep it:
 
 * Fast DDS keeps each reader's sample buffers at the size of the largest sample received
   (rmw_fastrtps sets the history memory policy ``PREALLOCATED_WITH_REALLOC``);

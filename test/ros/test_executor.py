@@ -112,3 +112,14 @@ def test_the_spin_thread_does_not_busy_loop_while_a_callback_waits_for_a_free_wo
         assert _wait(lambda: sorted(done) == [1, 2, 3]), f"callbacks done {done}"
     # idle waiting costs ~0; rclpy 7.1's MultiThreadedExecutor spends ~1 CPU second per second here
     assert cpu_per_wall < 0.3, f"the executor used {cpu_per_wall:.2f} CPU s per s while waiting"
+
+
+def test_the_work_around_is_used_only_for_rclpy_versions_with_the_busy_loop():
+    from battery_predictor.nodes.executor import FIXED_IN, needs_workaround
+
+    assert FIXED_IN == (10, 0, 4)
+    assert needs_workaround((7, 1, 5))
+    assert needs_workaround((10, 0, 3))
+    assert not needs_workaround((10, 0, 4))
+    assert not needs_workaround((11, 0, 0))
+    assert needs_workaround(None)  # unknown: keep the work-around
