@@ -125,9 +125,6 @@ class CheckpointResult:
     counters_s: dict[str, float] = field(default_factory=dict)
     p10_s: float = math.nan
     p90_s: float = math.nan
-    #: Log deviations of P10 / P90 from P50 without the structural part (to calibrate it).
-    lower_log_without_model: float = math.nan
-    upper_log_without_model: float = math.nan
     #: ``{source: [lower, upper]}`` log deviations at the band (see :class:`~battery_predictor.prediction.uncertainty.Spread`).
     spread_log: dict[str, list[float]] = field(default_factory=dict)
 
@@ -189,10 +186,9 @@ def evaluate_recording(params: PackParams, rec: Recording, *, cutoff_v: float, c
         answer = core.remaining_runtime(stamp)
         counters = {name: counter_remaining_s(win, discharge.start_s, stamp, cap) for name, cap in capacities_ah.items()}
         truth = discharge.end_s - stamp if discharge.known else math.nan
-        lower, upper = answer.spread.total(without="model") if answer.spread is not None else (math.nan, math.nan)
         results.append(CheckpointResult(fraction, stamp - discharge.start_s, truth, answer.remaining_s, answer.valid,
                                         answer.status, answer.reason, counters, answer.remaining_p10_s,
-                                        answer.remaining_p90_s, lower, upper, _spread_parts(answer.spread)))
+                                        answer.remaining_p90_s, _spread_parts(answer.spread)))
     temps = win.temperature_k[np.isfinite(win.temperature_k)]
     mean_c = float(np.mean(temps) - 273.15) if temps.size else math.nan
     return RecordingResult(str(rec.source), discharge, mean_c, results)
@@ -249,12 +245,12 @@ def interval_coverage(checkpoints: Sequence[CheckpointResult]) -> dict[str, floa
 
 def calibrate_runtime_sigma(results: Sequence[RecordingResult], coverage: float = 0.8) -> tuple[float, int]:
     """Structural runtime sigma (log) with which P10..P90 holds ``coverage`` of these checkpoints, and their count."""
-    from battery_predictor.prediction.uncertainty import calibrated_model_sigma
+    from battery_predictor.prediction.uncertainty import Spread, calibrated_model_sigma
 
-    rows = [c for r in results for c in r.checkpoints
-            if c.valid and math.isfinite(c.true_remaining_s) and math.isfinite(c.lower_log_without_model)]
-    sigma = calibrated_model_sigma([c.predicted_s for c in rows], [c.true_remaining_s for c in rows],
-                                   [c.lower_log_without_model for c in rows], [c.upper_log_without_model for c in rows],
+    rows = [c for r in results for c in r.checkpoints if c.valid and math.isfinite(c.true_remaining_s) and c.spread_log]
+    spreads = [Spread({k: v[0] for k, v in c.spread_log.items()}, {k: v[1] for k, v in c.spread_log.items()})
+               for c in rows]
+    sigma = calibrated_model_sigma([c.predicted_s for c in rows], [c.true_remaining_s for c in rows], spreads,
                                    coverage)
     return sigma, len(rows)
 

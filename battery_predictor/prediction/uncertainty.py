@@ -20,7 +20,9 @@ A prediction is uncertain for four reasons, each propagated through the pack mod
 
 The parts are combined as independent deviations of the log remaining time (of the voltage for
 routes) at the band's quantile: the lower and upper deviations separately, because the load and
-temperature scenarios are not symmetric.
+temperature scenarios are not symmetric. An undecided load kind is not a spread but a second
+possible model: its deviation is added to the others' (the band of a mixture reaches the other
+model's band), :data:`MIXTURE_SOURCES`.
 """
 
 from __future__ import annotations
@@ -55,6 +57,8 @@ DEFAULT_CAPACITY_REL_SIGMA = 0.02
 LOAD_BLOCK_S = 300.0
 #: Fewer complete blocks than this: the spread of the windows is taken instead (wider).
 MIN_LOAD_BLOCKS = 3
+#: Sources that are alternative models, not spreads: added to the root-sum-square of the others.
+MIXTURE_SOURCES = ("load_kind",)
 
 
 @dataclass(frozen=True)
@@ -226,11 +230,19 @@ class Spread:
     lower: dict[str, float]
     upper: dict[str, float]
 
-    def total(self, *, without: str = "") -> tuple[float, float]:
-        """Root-sum-square of the lower and upper deviations (leaving out ``without``)."""
-        lo = math.sqrt(sum(v ** 2 for k, v in self.lower.items() if k != without))
-        hi = math.sqrt(sum(v ** 2 for k, v in self.upper.items() if k != without))
-        return lo, hi
+    def total(self) -> tuple[float, float]:
+        """Lower and upper deviation of the band: root-sum-square of the spreads plus the alternative models'."""
+        return _combined(self.lower), _combined(self.upper)
+
+    def with_model_sigma(self, sigma_log: float) -> Spread:
+        """The same spread with the structural part at ``sigma_log`` (log, one standard deviation)."""
+        band = Z_P90 * sigma_log
+        return Spread({**self.lower, "model": band}, {**self.upper, "model": band})
+
+
+def _combined(parts: dict[str, float]) -> float:
+    spread = math.sqrt(sum(v ** 2 for k, v in parts.items() if k not in MIXTURE_SOURCES))
+    return spread + sum(v for k, v in parts.items() if k in MIXTURE_SOURCES)
 
 
 def interval(p50: float, lower_log: float, upper_log: float) -> tuple[float, float]:
@@ -249,25 +261,24 @@ def charge_deviation_log(delta_ah: float, charge_to_cutoff_ah: float) -> tuple[f
     return -math.log(max(1.0 - share, 0.05)), math.log1p(share)
 
 
-def calibrated_model_sigma(p50_s: Sequence[float], true_s: Sequence[float], lower: Sequence[float],
-                           upper: Sequence[float], coverage: float = 0.8) -> float:
+def calibrated_model_sigma(p50_s: Sequence[float], true_s: Sequence[float], spreads: Sequence[Spread],
+                           coverage: float = 0.8) -> float:
     """Smallest structural sigma (log) with which P10..P90 holds ``coverage`` of the checkpoints.
 
-    ``lower`` / ``upper`` are each checkpoint's deviations without the structural part (as
-    :meth:`Spread.total` ``without="model"``). Returns 0 when they already cover enough.
+    Each checkpoint's P50 (s), truth (s) and :class:`Spread` (its structural part is replaced).
+    Returns 0 when the other parts already cover enough, NaN without usable checkpoints.
     """
-    p50 = np.asarray(p50_s, dtype=float)
-    truth = np.asarray(true_s, dtype=float)
-    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
-    ok = (p50 > 0) & (truth > 0) & np.isfinite(lo) & np.isfinite(hi)
-    if not ok.any():
+    rows = [(math.log(t / p), s) for p, t, s in zip(p50_s, true_s, spreads)
+            if p > 0 and t > 0 and math.isfinite(p) and math.isfinite(t)]
+    if not rows:
         return math.nan
-    err = np.log(truth[ok] / p50[ok])
-    lo, hi = lo[ok], hi[ok]
 
     def covered(sigma: float) -> float:
-        band = Z_P90 * sigma
-        return float(np.mean((err >= -np.hypot(lo, band)) & (err <= np.hypot(hi, band))))
+        inside = 0
+        for err, spread in rows:
+            lo, hi = spread.with_model_sigma(sigma).total()
+            inside += -lo <= err <= hi
+        return inside / len(rows)
 
     if covered(0.0) >= coverage:
         return 0.0

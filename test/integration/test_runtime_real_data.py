@@ -21,7 +21,6 @@ from battery_predictor.evaluation.runtime_eval import (
 )
 from battery_predictor.io.loader import load_recording
 from battery_predictor.params import load_params
-from battery_predictor.prediction.core import PredictorConfig
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO.parent / "shared" / "data" / "panasonic_18650pf"
@@ -56,13 +55,17 @@ def test_the_shipped_structural_spread_is_the_calibration_on_the_fit_recordings(
     assert sigma == pytest.approx(params.provenance["uncertainty"]["runtime_log_sigma"], abs=0.01)
 
 
-def test_emulated_temi_packs_held_out_from_the_calibration_hold_the_truth_in_their_intervals():
-    """The shipped params/temi.yaml (structural spread calibrated on pack 1) on packs 2-4 and the static bag."""
+def test_emulated_temi_packs_hold_the_truth_in_their_intervals_at_the_default_structural_spread():
+    """The shipped params/temi.yaml (no calibration: the default structural spread) on the five Temi bags.
+
+    Calibrated on pack 1's day alone the structural spread comes out too small for packs 2-4, whose
+    capacities differ (docs/uncertainty); the default holds them.
+    """
     params = load_params(REPO / "params" / "temi.yaml")
-    assert params.provenance["uncertainty"]["calibrated_on"] == ["bags/temi_dynamic_pack1"]
-    names = ("temi_dynamic_pack2", "temi_dynamic_pack3", "temi_dynamic_pack4", "temi_static_0p5c_pack1")
-    config = PredictorConfig(params_file=str(params.source), cutoff_voltage_v=13.30, load_model="current")
-    results = [evaluate_recording(params, load_recording(REPO / "bags" / n), cutoff_v=13.30, capacities_ah={},
-                                  config=config) for n in names]
+    assert "uncertainty" not in params.provenance
+    names = ("temi_dynamic_pack1", "temi_dynamic_pack2", "temi_dynamic_pack3", "temi_dynamic_pack4",
+             "temi_static_0p5c_pack1")
+    results = [evaluate_recording(params, load_recording(REPO / "bags" / n), cutoff_v=13.30, capacities_ah={})
+               for n in names]
     interval = summarise(results, [])["pooled_interval"]
-    assert interval["intervals"] == 36 and 70.0 <= interval["inside_pct"] <= 90.0, interval
+    assert interval["intervals"] == 45 and 70.0 <= interval["inside_pct"] <= 90.0, interval

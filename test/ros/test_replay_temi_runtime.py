@@ -116,20 +116,19 @@ def test_mean_absolute_error_over_all_bags(ros_context: Context) -> None:
 
 
 def test_published_intervals_hold_the_truth_and_are_not_decorative(ros_context: Context) -> None:
-    """``remaining_p10_s`` <= ``remaining_s`` <= ``remaining_p90_s``; packs 2-4 inside P10..P90 at >= 70 %, band < 1.6x.
+    """``remaining_p10_s`` <= ``remaining_s`` <= ``remaining_p90_s``; inside P10..P90 at >= 70 %, band < 2.5x.
 
-    The shipped params' structural spread is calibrated on pack 1 (docs/uncertainty). These 30
-    checkpoints (30..300 min of 8 h discharges, ten per bag, strongly correlated) cannot judge the
+    The shipped params carry no calibration (the default structural spread, docs/uncertainty). These
+    40 checkpoints (30..300 min of 8 h discharges, ten per bag, strongly correlated) cannot judge the
     80 +- 10 % target itself: that is measured over whole discharges with ``evaluate-runtime``
-    (test/integration/test_runtime_real_data.py, docs/uncertainty). MEASURED here: 100 % inside,
-    P90 / P10 = 1.41-1.48.
+    (test/integration/test_runtime_real_data.py, docs/uncertainty). MEASURED: 100 % inside, median
+    P90 / P10 1.91 (the uncalibrated structural spread is wide on purpose).
     """
-    every = [c for name in TEMI_BAGS for c in _checkpoints(name, ros_context)]
-    assert all(c.p10_min <= c.predicted_min <= c.p90_min for c in every)
-    checkpoints = [c for name in TEMI_BAGS[1:] for c in _checkpoints(name, ros_context)]
+    checkpoints = [c for name in TEMI_BAGS for c in _checkpoints(name, ros_context)]
+    assert all(c.p10_min <= c.predicted_min <= c.p90_min for c in checkpoints)
     inside = np.mean([c.p10_min <= c.true_min <= c.p90_min for c in checkpoints])
     ratio = np.median([c.p90_min / c.p10_min for c in checkpoints])
     table = "\n".join(f"  {c.p10_min:6.1f} {c.predicted_min:6.1f} {c.p90_min:6.1f} true {c.true_min:6.1f}"
                       for c in checkpoints)
     assert inside >= 0.7, f"truth inside P10..P90 at {inside:.0%} of {len(checkpoints)} checkpoints\n{table}"
-    assert ratio < 1.6, f"median P90 / P10 {ratio:.2f}\n{table}"
+    assert ratio < 2.5, f"median P90 / P10 {ratio:.2f}\n{table}"

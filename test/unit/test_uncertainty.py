@@ -64,12 +64,15 @@ def test_calibrated_model_sigma_recovers_the_spread_of_log_errors():
     rng = np.random.default_rng(1)
     p50 = rng.uniform(600.0, 6000.0, 4000)
     truth = p50 * np.exp(rng.normal(0.0, 0.2, p50.size))
-    zeros = np.zeros(p50.size)
-    assert calibrated_model_sigma(p50, truth, zeros, zeros) == pytest.approx(0.2, rel=0.05)
+
+    def spreads(other: float) -> list[Spread]:
+        return [Spread({"load": other}, {"load": other})] * p50.size
+
+    assert calibrated_model_sigma(p50, truth, spreads(0.0)) == pytest.approx(0.2, rel=0.05)
     # deviations that already cover everything leave nothing to the structure
-    assert calibrated_model_sigma(p50, truth, zeros + 1.0, zeros + 1.0) == 0.0
+    assert calibrated_model_sigma(p50, truth, spreads(1.0)) == 0.0
     # other parts of the band leave less to it
-    assert calibrated_model_sigma(p50, truth, zeros + 0.15, zeros + 0.15) < 0.2
+    assert calibrated_model_sigma(p50, truth, spreads(0.15)) < 0.2
 
 
 def test_interval_and_charge_deviation_bracket_the_median():
@@ -77,7 +80,9 @@ def test_interval_and_charge_deviation_bracket_the_median():
     assert p10 == pytest.approx(100 * math.exp(-0.2)) and p90 == pytest.approx(100 * math.exp(0.3))
     lower, upper = charge_deviation_log(0.5, 2.0)
     assert lower == pytest.approx(-math.log(0.75)) and upper == pytest.approx(math.log(1.25))
-    assert Spread({"a": 0.3, "model": 0.4}, {"a": 0.1}).total(without="model") == (pytest.approx(0.3), 0.1)
+    spread = Spread({"a": 0.3, "model": 0.4}, {"a": 0.1, "load_kind": 0.2})
+    assert spread.total() == (pytest.approx(0.5), pytest.approx(0.3))  # an alternative model adds, spreads combine
+    assert spread.with_model_sigma(0.0).total() == (pytest.approx(0.3), pytest.approx(0.3))
 
 
 def test_activation_energy_scenario_is_a_temperature_further_from_the_reference():
