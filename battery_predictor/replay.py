@@ -28,10 +28,11 @@ from typing import Any
 import numpy as np
 
 from battery_predictor.errors import BagError
-from battery_predictor.io import bags as _bags
+from battery_predictor.io.bags import schema, storage
+from battery_predictor.io.bags.topics import select_topic
 
 #: Types of the battery input topics a replay plays.
-INPUT_TYPES = (_bags.BATTERY_STATE_TYPE, _bags.FLOAT64_TYPE, _bags.FLOAT32_TYPE, _bags.TEMPERATURE_TYPE)
+INPUT_TYPES = (schema.BATTERY_STATE_TYPE, schema.FLOAT64_TYPE, schema.FLOAT32_TYPE, schema.TEMPERATURE_TYPE)
 #: Custom message types the output bag needs definitions for.
 CUSTOM_TYPES = ("battery_predictor_msgs/msg/PackState", "battery_predictor_msgs/msg/RemainingRuntime",
                 "battery_predictor_msgs/msg/RouteSection")
@@ -147,8 +148,8 @@ class ReplayStream:
 def stream_from_messages(messages: Sequence[BagMessage], *, style: str, battery_topic: str,
                          metadata: dict[str, Any] | None = None, source: str = "<memory>") -> ReplayStream:
     """A :class:`ReplayStream` of messages built in memory (tests, benchmarks); times are ROS times."""
-    if style not in _bags.STYLES:
-        raise BagError(f"{source}: style {style!r} (must be one of {', '.join(_bags.STYLES)})")
+    if style not in schema.STYLES:
+        raise BagError(f"{source}: style {style!r} (must be one of {', '.join(schema.STYLES)})")
     ordered = sorted(messages, key=lambda m: m.log_time_ns)
     if not ordered:
         raise BagError(f"{source}: no messages")
@@ -173,34 +174,34 @@ def read_replay_stream(path: str | os.PathLike[str], *, topic: str | None = None
         Missing, corrupt, or without battery topics.
     """
     src = Path(path)
-    p = _bags._resolve(src)  # noqa: SLF001 - shared bag plumbing of this package
-    custom = _bags._read_custom_data(p)
+    p = storage.resolve(src)
+    custom = storage.read_custom_data(p)
     messages: list[BagMessage] = []
-    with _bags._open_reader(p) as reader:
-        topics = _bags._topics(reader)
-        style, name = _bags._select(src, topics, topic)
+    with storage.open_reader(p) as reader:
+        topics = storage.list_topics(reader)
+        style, name = select_topic(src, topics, topic)
         if style == "battery_state":
             wanted = {name}
         else:
-            wanted = {name + s for s in _bags.RELAY_SUFFIXES.values() if name + s in topics}
+            wanted = {name + s for s in schema.RELAY_SUFFIXES.values() if name + s in topics}
         conns = [c for c in reader.connections if c.topic in wanted and c.msgtype in INPUT_TYPES]
         try:
             for conn, log_ns, raw in reader.messages(connections=conns):
                 messages.append(BagMessage(int(log_ns), conn.topic, conn.msgtype, bytes(raw)))
         except Exception as exc:  # noqa: BLE001 - rosbags raises many types on corrupt input
-            raise _bags._corrupt(src, exc) from None
+            raise storage.corrupt(src, exc) from None
     if not messages:
         raise BagError(f"{src}: no messages on {', '.join(sorted(wanted))}")
     messages.sort(key=lambda m: m.log_time_ns)  # stable: keeps voltage, current, temperature order
     origin = base = None
     try:
-        origin = int(custom[_bags._KEY_ORIGIN_NS])
-        base = float(custom[_bags._KEY_BASE_S])
+        origin = int(custom[schema.KEY_ORIGIN_NS])
+        base = float(custom[schema.KEY_BASE_S])
     except (KeyError, ValueError):
         pass
     return ReplayStream(source=str(src), style=style, battery_topic=name,
                         topics={m.topic: m.msgtype for m in messages}, messages=messages,
-                        metadata=_bags._decode_custom(custom), _origin_ns=origin,
+                        metadata=storage.decode_custom(custom), _origin_ns=origin,
                         _base_s=base if base is not None else 0.0)
 
 

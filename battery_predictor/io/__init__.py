@@ -3,7 +3,9 @@
 ROS-free: nothing here imports rclpy; bags are read and written with ``rosbags``.
 
 * :mod:`battery_predictor.io.csv_io`: ``load_csv``, ``load_csv_groups``, ``save_csv``;
-* :mod:`battery_predictor.io.bags`: ``write_recording_bag``, ``read_recording_bag``, ``bag_info``;
+* :mod:`battery_predictor.io.bags`: ``write_recording_bag``, ``read_recording_bag``, ``bag_info``
+  (``schema``, ``storage``, ``topics``, ``writer``, ``reader``, ``info``);
+* :mod:`battery_predictor.io.validation`: the checks both readers run on the parsed samples;
 * :mod:`battery_predictor.io.loader`: ``load_recording``, ``csv_to_bag``, ``bag_to_csv``.
 """
 

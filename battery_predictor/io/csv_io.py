@@ -45,10 +45,12 @@ e.g. ``data.csv: line 3 (data row 2): ...``:
   ``duplicate_times="keep_last"`` (recommended: the later row is the start of
   the new step, which keeps the zero-order-hold current correct) or
   ``"keep_first"`` resolves them. Times that go backwards are always an error;
-* voltages that look like millivolts (median > :data:`MAX_PLAUSIBLE_VOLTAGE_V`),
+* voltages that look like millivolts (median >
+  :data:`~battery_predictor.io.validation.MAX_PLAUSIBLE_VOLTAGE_V`),
   currents that look like milliamperes (median of the non-zero ``|current_A|``
-  > :data:`MAX_PLAUSIBLE_CURRENT_A`), implausible temperatures (kelvin in a ``_C`` column or vice versa);
-* the wrong current sign convention, see :func:`check_current_sign`.
+  > :data:`~battery_predictor.io.validation.MAX_PLAUSIBLE_CURRENT_A`), implausible temperatures (kelvin in a ``_C`` column or vice versa);
+* the wrong current sign convention, see
+  :func:`battery_predictor.io.validation.check_current_sign`.
 
 Long-format files that hold several records (for example one pulse test per
 ``soc_label``/``cell``) are read with :func:`load_csv_groups`.
@@ -66,8 +68,9 @@ from typing import Any
 
 import numpy as np
 
-from battery_predictor.conventions import celsius_to_kelvin, kelvin_to_celsius
+from battery_predictor.conventions import kelvin_to_celsius
 from battery_predictor.errors import InputDataError, in_cli, option_hint
+from battery_predictor.io.validation import check_samples
 from battery_predictor.recording import Recording
 
 #: Columns every measurement CSV must have.
@@ -88,12 +91,6 @@ TEMPERATURE_COLUMNS: tuple[str, ...] = (
     "chamber_temperature_C",
 )
 
-#: Robot packs stay below this; a larger median voltage means millivolts.
-MAX_PLAUSIBLE_VOLTAGE_V = 100.0
-#: A larger median of the non-zero |current| means milliamperes.
-MAX_PLAUSIBLE_CURRENT_A = 1000.0
-#: Plausible range of a measured cell/ambient temperature in °C.
-PLAUSIBLE_TEMPERATURE_RANGE_C = (-60.0, 150.0)
 
 DUPLICATE_TIME_POLICIES = ("error", "keep_first", "keep_last")
 
@@ -232,143 +229,8 @@ def _parse_column(table: _Table, name: str) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------
-# Plausibility checks shared with the bag reader
-# ---------------------------------------------------------------------------
-
-
-def voltage_response_score(voltage_v: np.ndarray, current_a: np.ndarray) -> float:
-    """How well the voltage responds to the current as a discharge-positive current should.
-
-    Two pieces of physics, both independent of the state of charge:
-
-    * at current steps the terminal voltage jumps the other way (ohmic drop:
-      ``dV ≈ -R dI``);
-    * while current flows, the voltage drifts down when ``current_a > 0``
-      (discharge) and up when ``current_a < 0`` (charge).
-
-    Each gives a normalised score in [-1, 1] (sum of the signed voltage changes
-    over the sum of their magnitudes); the result is their mean. It is
-    antisymmetric in the current sign: about +1 for a correct recording, about
-    -1 for one with the sign flipped, 0 when there is no evidence.
-    """
-    v = np.asarray(voltage_v, dtype=float)
-    i = np.asarray(current_a, dtype=float)
-    if len(i) < 3:
-        return 0.0
-    i_max = float(np.max(np.abs(i)))
-    if not np.isfinite(i_max) or i_max <= 0.0:
-        return 0.0
-    a, b = i[:-1], i[1:]
-    dv = np.diff(v)
-    di = np.diff(i)
-    scores = []
-    flowing = (np.abs(a) > 0.05 * i_max) & (np.abs(b) > 0.05 * i_max) & (np.sign(a) == np.sign(b))
-    den = float(np.sum(np.abs(dv[flowing])))
-    if den > 0.0:
-        scores.append(-float(np.sum(np.sign(a[flowing]) * dv[flowing])) / den)
-    steps = np.abs(di) > 0.1 * i_max
-    den = float(np.sum(np.abs(dv[steps])))
-    if den > 0.0:
-        scores.append(-float(np.sum(np.sign(di[steps]) * dv[steps])) / den)
-    return float(np.mean(scores)) if scores else 0.0
-
-
-def check_current_sign(time_s: np.ndarray, voltage_v: np.ndarray, current_a: np.ndarray, *, source: str) -> None:
-    """Raise :class:`InputDataError` when ``current_a`` looks like it is negative while discharging.
-
-    Rule (documented in the package README): the sign is rejected when
-
-    * the recording looks like a *charge* by throughput -- the charge integral
-      is negative **and** more than 60 % of the non-zero samples (``|I|`` above
-      1 % of the peak) are negative -- and the voltage response
-      (:func:`voltage_response_score`) does not clearly confirm the convention
-      (score below +0.3); **or**
-    * the voltage response clearly contradicts the convention (score below
-      -0.3: the voltage rises while ``current_a > 0`` and jumps up when it
-      steps up).
-
-    So a constant-current discharge followed by a longer CC-CV recharge (net
-    charge slightly negative, most samples negative, e.g. the LG M50 rate
-    tests) passes because its voltage confirms the sign, while the same file
-    with the sign flipped is rejected.
-    """
-    t = np.asarray(time_s, dtype=float)
-    v = np.asarray(voltage_v, dtype=float)
-    i = np.asarray(current_a, dtype=float)
-    if len(i) < 3:
-        return
-    i_max = float(np.max(np.abs(i)))
-    if i_max <= 0.0:
-        return
-    charge_ah = float(np.sum(0.5 * (i[1:] + i[:-1]) * np.diff(t))) / 3600.0  # trapezoidal
-    nonzero = i[np.abs(i) > 0.01 * i_max]
-    negative_fraction = float(np.mean(nonzero < 0.0)) if len(nonzero) else 0.0
-    score = voltage_response_score(v, i)
-    looks_like_charge = charge_ah < 0.0 and negative_fraction > 0.6
-    if (looks_like_charge and score < 0.3) or score < -0.3:
-        raise InputDataError(
-            f"{source}: current_A seems to use the wrong sign convention (net charge {charge_ah:+.4g} Ah, "
-            f"{100 * negative_fraction:.0f} % of the non-zero samples negative, voltage-response score {score:+.2f}, "
-            "where +1 means the voltage drops when current_A rises); current_A > 0 must mean DISCHARGE: "
-            "flip the sign of the column (sensor_msgs/BatteryState and many cyclers use negative = discharge)"
-            + option_hint("expect_discharge", False, "to skip this check")
-        )
-
-
-def check_units(voltage_v: np.ndarray, current_a: np.ndarray, *, source: str) -> None:
-    """Raise :class:`InputDataError` when voltage/current look like mV/mA."""
-    v_med = float(np.median(voltage_v)) if len(voltage_v) else 0.0
-    if v_med > MAX_PLAUSIBLE_VOLTAGE_V:
-        raise InputDataError(
-            f"{source}: column voltage_V has median {v_med:.6g}, which looks like millivolts; convert to volts"
-        )
-    abs_i = np.abs(current_a)
-    nonzero = abs_i[abs_i > 0.0]
-    i_med = float(np.median(nonzero)) if len(nonzero) else 0.0
-    if i_med > MAX_PLAUSIBLE_CURRENT_A:
-        raise InputDataError(
-            f"{source}: column current_A has median |I| {i_med:.6g}, which looks like milliamperes; convert to amperes"
-        )
-
-
-def check_temperature_k(temperature_k: np.ndarray, *, source: str, column: str) -> None:
-    """Raise :class:`InputDataError` when a temperature (in K) is implausible for its declared unit."""
-    finite = temperature_k[np.isfinite(temperature_k)]
-    if not len(finite):
-        return
-    med_c = float(np.median(finite)) - 273.15
-    lo, hi = PLAUSIBLE_TEMPERATURE_RANGE_C
-    if not lo <= med_c <= hi:
-        if column.endswith("_C") and med_c > hi:
-            hint = "; the values look like kelvin: name the column temperature_K or convert to °C"
-        elif column.endswith("_K") and med_c < lo:
-            hint = "; the values look like °C: name the column temperature_C or convert to K"
-        else:
-            hint = ""
-        raise InputDataError(
-            f"{source}: column {column!r} has median {med_c:.4g} °C, outside the plausible {lo:g}..{hi:g} °C{hint}"
-        )
-
-
-# ---------------------------------------------------------------------------
 # Building a Recording
 # ---------------------------------------------------------------------------
-
-
-def _fill_nearest(t: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Replace NaN by the value of the nearest finite sample in time."""
-    good = np.isfinite(values)
-    if good.all():
-        return values
-    tg, vg = t[good], values[good]
-    idx = np.clip(np.searchsorted(tg, t), 1, len(tg) - 1) if len(tg) > 1 else np.zeros(len(t), dtype=int)
-    if len(tg) > 1:
-        left = idx - 1
-        use_left = np.abs(t - tg[left]) <= np.abs(tg[idx] - t)
-        idx = np.where(use_left, left, idx)
-    out = values.copy()
-    out[~good] = vg[idx[~good]]
-    return out
 
 
 def _build(
@@ -435,30 +297,16 @@ def _build(
         rows, t, v, i = rows[keep], t[keep], v[keep], i[keep]
         temp = temp[keep] if temp is not None else None
 
-    check_units(v, i, source=source)
+    def gap_message(k: int, n: int) -> str:
+        return (f"{source}: {where(k)}: column {temp_name!r} is empty or non-finite ({n} such row(s))"
+                + option_hint("drop_nan", True, "to fill gaps from the nearest measured sample"))
 
-    temperature_k = None
-    if temp is not None:
-        finite = np.isfinite(temp)
-        if finite.any():
-            if not finite.all():
-                if not drop_nan:
-                    k = int(np.argmax(~finite))
-                    raise InputDataError(
-                        f"{source}: {where(k)}: column {temp_name!r} is empty or non-finite "
-                        f"({int((~finite).sum())} such row(s))"
-                        + option_hint("drop_nan", True, "to fill gaps from the nearest measured sample")
-                    )
-                meta["filled_temperature_rows"] = int((~finite).sum())
-                temp = _fill_nearest(t, temp)
-            temperature_k = celsius_to_kelvin(temp) if temp_unit == "C" else np.asarray(temp, dtype=float)
-            check_temperature_k(temperature_k, source=source, column=str(temp_name))
-        meta["temperature_column"] = temp_name if temperature_k is not None else None
-    else:
-        meta["temperature_column"] = None
-
-    if expect_discharge:
-        check_current_sign(t, v, i, source=source)
+    temperature_k, filled = check_samples(
+        t, v, i, temp, source=source, column=str(temp_name), celsius=temp_unit == "C", drop_nan=drop_nan,
+        gap_message=gap_message, expect_discharge=expect_discharge)
+    if filled:
+        meta["filled_temperature_rows"] = filled
+    meta["temperature_column"] = temp_name if temperature_k is not None else None
     return Recording(
         time_s=np.ascontiguousarray(t),
         voltage_v=np.ascontiguousarray(v),
@@ -506,7 +354,7 @@ def load_csv(
     path : str or os.PathLike
         CSV file with ``time_s``, ``voltage_V``, ``current_A`` columns.
     expect_discharge : bool
-        Check that ``current_A > 0`` means discharge (:func:`check_current_sign`).
+        Check that ``current_A > 0`` means discharge (:func:`~battery_predictor.io.validation.check_current_sign`).
         Pass False for recordings where the check cannot decide (pure charge
         with no usable voltage response, synthetic data with constant voltage).
     drop_nan : bool

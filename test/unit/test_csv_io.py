@@ -9,14 +9,8 @@ import numpy as np
 import pytest
 
 from battery_predictor.errors import InputDataError
-from battery_predictor.io.csv_io import (
-    TEMPERATURE_COLUMNS,
-    check_current_sign,
-    load_csv,
-    load_csv_groups,
-    save_csv,
-    voltage_response_score,
-)
+from battery_predictor.io.csv_io import TEMPERATURE_COLUMNS, load_csv, load_csv_groups, save_csv
+from battery_predictor.io.validation import check_current_sign, voltage_response_score
 from battery_predictor.recording import Recording
 
 SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"

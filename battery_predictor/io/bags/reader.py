@@ -1,0 +1,180 @@
+"""Reading a battery recording from a bag: decoding, merging the relay topics, the shared checks."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from battery_predictor.conventions import battery_state_current_to_internal
+from battery_predictor.errors import BagError, InputDataError, option_hint
+from battery_predictor.io.bags.schema import KEY_BASE_S, KEY_ORIGIN_NS, RELAY_SUFFIXES
+from battery_predictor.io.bags.storage import (
+    decode_custom,
+    list_topics,
+    open_reader,
+    read_custom_data,
+    read_messages,
+    resolve,
+)
+from battery_predictor.io.bags.topics import select_topic
+from battery_predictor.io.validation import check_samples, nearest_index
+from battery_predictor.recording import Recording
+
+_RELAY_MIN_PAIR_TOLERANCE_S = 0.5
+
+
+def _stamp_ns(log_ns: int, header) -> int:
+    ns = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+    return ns if ns > 0 else log_ns
+
+
+def _sorted_unique(ns: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], int]:
+    """Sort by time (stable) and keep the last sample of each repeated stamp."""
+    order = np.argsort(ns, kind="stable")
+    ns = ns[order]
+    arrays_sorted = [a[order] for a in arrays]
+    keep = np.append(np.diff(ns) != 0, True)
+    return ns[keep], [a[keep] for a in arrays_sorted], int((~keep).sum())
+
+
+def read_recording_bag(
+    path: str | os.PathLike[str],
+    *,
+    topic: str | None = None,
+    drop_nan: bool = False,
+    expect_discharge: bool = False,
+) -> Recording:
+    """Read a battery recording from a rosbag2 directory or a single ``.mcap`` file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Bag directory (with ``metadata.yaml``) or ``.mcap`` file.
+    topic : str, optional
+        A ``BatteryState`` topic, a relay prefix (``/battery``) or one of the
+        relay topics. Default: auto-detect (a single BatteryState topic,
+        preferring ``/battery_state``; else a single relay group, preferring
+        ``/battery``).
+    drop_nan : bool
+        Drop samples with a NaN/inf voltage or current or a voltage <= 0 V and
+        fill temperature gaps from the nearest sample, instead of raising.
+    expect_discharge : bool
+        Run the sign-convention check of
+        :func:`battery_predictor.io.validation.check_current_sign` (off by default:
+        robot recordings may include docking/charging).
+
+    Returns
+    -------
+    Recording
+        ``source`` is the path; ``metadata`` is the decoded ``custom_data``
+        (reserved ``battery_predictor.*`` keys removed), plus
+        ``dropped_duplicate_stamps`` / ``dropped_nan_samples`` /
+        ``filled_temperature_samples`` / ``relay_unpaired_samples`` when non-zero.
+        Messages with the same stamp keep the last one.
+    """
+    src = Path(path)
+    p = resolve(src)
+    custom = read_custom_data(p)
+    with open_reader(p) as reader:
+        topics = list_topics(reader)
+        style, name = select_topic(src, topics, topic)
+        if style == "battery_state":
+            msgs = read_messages(src, reader, {name}, custom)[name]
+            if not msgs:
+                raise BagError(f"{src}: topic {name} has no messages")
+            ns = np.array([_stamp_ns(log, m.header) for log, m in msgs], dtype=np.int64)
+            v = np.array([m.voltage for _, m in msgs], dtype=float)
+            i = np.asarray(battery_state_current_to_internal(np.array([m.current for _, m in msgs], dtype=float)))
+            temp_c = np.array([m.temperature for _, m in msgs], dtype=float)
+            ns, (v, i, temp_c), dup = _sorted_unique(ns, v, i, temp_c)
+            extra = {"dropped_duplicate_stamps": dup}
+            where = name
+        else:
+            names = {name + s for s in RELAY_SUFFIXES.values() if name + s in topics}
+            got = read_messages(src, reader, names, custom)
+            ns, v, i, temp_c, extra = _merge_relay(src, name, got)
+            where = name + "/*"
+    source = str(src)
+    meta = decode_custom(custom)
+    extra_meta = {k: val for k, val in extra.items() if val}
+
+    bad = ~(np.isfinite(v) & np.isfinite(i)) | (v <= 0)
+    if bad.any():
+        if not drop_nan:
+            k = int(np.argmax(bad))
+            raise InputDataError(
+                f"{source}: {where}: sample {k} (stamp {int(ns[k])} ns) has an invalid voltage/current "
+                f"({v[k]!r} V, {i[k]!r} A: NaN, inf or voltage <= 0); {int(bad.sum())} such sample(s)"
+                + option_hint("drop_nan", True, "to drop them")
+            )
+        extra_meta["dropped_nan_samples"] = int(bad.sum())
+        ns, v, i, temp_c = ns[~bad], v[~bad], i[~bad], temp_c[~bad]
+        if not len(ns):
+            raise InputDataError(f"{source}: {where}: no samples with a valid voltage and current")
+
+    time_s = _times(ns, custom)
+
+    def gap_message(k: int, n: int) -> str:
+        return (f"{source}: {where}: sample {k} has no temperature while others do ({n} such sample(s))"
+                + option_hint("drop_nan", True, "to fill from the nearest sample"))
+
+    temperature_k, filled = check_samples(
+        time_s, v, i, temp_c, source=f"{source}: {where}", column="temperature (°C)", celsius=True,
+        drop_nan=drop_nan, gap_message=gap_message, expect_discharge=expect_discharge)
+    if filled:
+        extra_meta["filled_temperature_samples"] = filled
+    meta.update(extra_meta)
+    return Recording(time_s=time_s, voltage_v=v, current_a=i, temperature_k=temperature_k, source=source, metadata=meta)
+
+
+def _times(ns: np.ndarray, custom: dict[str, str]) -> np.ndarray:
+    try:
+        origin = int(custom[KEY_ORIGIN_NS])
+        base = float(custom[KEY_BASE_S])
+    except (KeyError, ValueError):
+        return ns.astype(float) / 1e9
+    return base + (ns - origin).astype(float) / 1e9
+
+
+def _merge_relay(p: Path, prefix: str, got: dict[str, list[tuple[int, Any]]]):
+    v_msgs = got.get(prefix + RELAY_SUFFIXES["voltage"], [])
+    i_msgs = got.get(prefix + RELAY_SUFFIXES["current"], [])
+    t_msgs = got.get(prefix + RELAY_SUFFIXES["temperature"], [])
+    if not v_msgs or not i_msgs:
+        empty = prefix + (RELAY_SUFFIXES["voltage"] if not v_msgs else RELAY_SUFFIXES["current"])
+        raise BagError(f"{p}: relay topic {empty} has no messages")
+    v_ns, (v,), dup_v = _sorted_unique(
+        np.array([log for log, _ in v_msgs], dtype=np.int64), np.array([m.data for _, m in v_msgs], dtype=float)
+    )
+    i_ns, (i_src,), dup_i = _sorted_unique(
+        np.array([log for log, _ in i_msgs], dtype=np.int64), np.array([m.data for _, m in i_msgs], dtype=float)
+    )
+    j = nearest_index(i_ns, v_ns)
+    dist_s = np.abs(i_ns[j] - v_ns) / 1e9
+    period = float(np.median(np.diff(v_ns))) / 1e9 if len(v_ns) > 1 else 0.0
+    tol = max(_RELAY_MIN_PAIR_TOLERANCE_S, 3.0 * period)
+    paired = dist_s <= tol
+    if not paired.any():
+        raise BagError(
+            f"{p}: relay topics {prefix}/voltage and {prefix}/current have no samples within {tol:.3g} s of each other"
+        )
+    ns, v, i = v_ns[paired], v[paired], i_src[j[paired]]
+    if t_msgs:
+        t_ns, (t_c,), _ = _sorted_unique(
+            np.array([log for log, _ in t_msgs], dtype=np.int64),
+            np.array([m.temperature for _, m in t_msgs], dtype=float),
+        )
+        good = np.isfinite(t_c)
+        if good.any():
+            t_ns, t_c = t_ns[good], t_c[good]
+            temp_c = t_c[nearest_index(t_ns, ns)]
+        else:
+            temp_c = np.full(len(ns), math.nan)
+    else:
+        temp_c = np.full(len(ns), math.nan)
+    extra = {"dropped_duplicate_stamps": dup_v + dup_i, "relay_unpaired_samples": int((~paired).sum())}
+    return ns, v, i, temp_c, extra
