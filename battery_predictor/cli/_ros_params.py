@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
-
+from battery_predictor.config import read_yaml_mapping
 from battery_predictor.errors import ParamsError
 
 #: Node names the params files configure.
@@ -22,12 +21,7 @@ def check_node_params_file(path: str, *, pack: str | None = None) -> Path:
     p = Path(path)
     if not p.is_file():
         raise ParamsError(f"{p}: node params file not found")
-    try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise ParamsError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from None
-    if not isinstance(data, dict):
-        raise ParamsError(f"{p}: expected a mapping of node names to ros__parameters")
+    p, data = read_yaml_mapping(p, not_mapping="expected a mapping of node names to ros__parameters")
     if "pack" in data and "cell" in data:
         raise ParamsError(f"{p}: this is a pack params file; pass node params such as params/ros/temi_nodes.yaml "
                           f"(with predictor.ros__parameters.params_file pointing to it) or use --pack {p}")
@@ -58,7 +52,7 @@ def check_nodes_against_pack(source: Path, monitor: dict, predictor: dict, *, pa
     The pack params file must load; the monitor's ``min_voltage_v..max_voltage_v`` must cover the pack's
     voltage window; the predictor's non-zero ``cutoff_voltage_v`` and ``route_min_voltage_v`` must lie in it.
     """
-    from battery_predictor.nodes._params import resolve_params_file
+    from battery_predictor.config import resolve_params_file
     from battery_predictor.params import load_params
     from battery_predictor.params_checks import check_monitor_range, check_node_voltages
 

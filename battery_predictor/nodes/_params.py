@@ -1,4 +1,4 @@
-"""Declaring ROS parameters with descriptors (description and range), and resolving file parameters.
+"""Declaring ROS parameters with descriptors (description and range); params files are found by :mod:`battery_predictor.config`.
 
 Parameters declared here are read-only: the nodes read them once at start-up, so a parameter service
 call (``ros2 param set``) is refused instead of being accepted and ignored. Pass ``read_only=False``
@@ -8,9 +8,6 @@ for a parameter the node applies when it changes.
 from __future__ import annotations
 
 import difflib
-import os
-import sys
-from pathlib import Path
 
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
@@ -75,32 +72,3 @@ def reject_undeclared(node: Node) -> None:
         named.append(f"'{name}'" + (f" (did you mean '{close[0]}'?)" if close else ""))
     raise ParamsError(f"{node.get_name()}: unknown parameter{'s' if len(named) > 1 else ''} {', '.join(named)}; "
                       f"see 'ros2 param describe' or params/ros/*.yaml for the declared ones")
-
-
-def packaged_params_dirs() -> list[Path]:
-    """Where bundled pack params files live: the installed share directory, then the source tree."""
-    out = [Path(sys.prefix) / "share" / "battery_predictor" / "params"]
-    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
-        if prefix:
-            out.append(Path(prefix) / "share" / "battery_predictor" / "params")
-    out.append(Path(__file__).resolve().parents[2] / "params")
-    return out
-
-
-def resolve_params_file(value: str) -> str:
-    """A pack params file path: absolute, relative to the working directory, or a bundled file name.
-
-    ``temi.yaml`` resolves to the bundled ``params/temi.yaml`` when no such file
-    is in the working directory. An unresolvable path is returned unchanged (the
-    predictor then reports the model as not loaded, with the path in the reason).
-    """
-    if not value:
-        return value
-    path = Path(value).expanduser()
-    if path.is_absolute() or path.exists():
-        return str(path)
-    for directory in packaged_params_dirs():
-        candidate = directory / path
-        if candidate.exists():
-            return str(candidate)
-    return value

@@ -36,9 +36,10 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import BatteryState, Temperature
 from std_msgs.msg import Float64
 
+from battery_predictor.config import resolve_params_file
 from battery_predictor.conventions import battery_state_current_to_internal, celsius_to_kelvin
 from battery_predictor.monitoring import STYLES, BatteryMonitor, MonitorConfig, PackSnapshot
-from battery_predictor.nodes._params import declare_float, declare_str, reject_undeclared, resolve_params_file
+from battery_predictor.nodes._params import declare_float, declare_str, reject_undeclared
 from battery_predictor.nodes._sync import TimerProbe
 from battery_predictor.nodes.messages import pack_state_msg, stamp_to_s
 

@@ -45,14 +45,9 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from battery_predictor.config import resolve_params_file
 from battery_predictor.errors import BatteryPredictorError, ParamsError
-from battery_predictor.nodes._params import (
-    declare_bool,
-    declare_float,
-    declare_str,
-    reject_undeclared,
-    resolve_params_file,
-)
+from battery_predictor.nodes._params import declare_bool, declare_float, declare_str, reject_undeclared
 from battery_predictor.nodes._sync import TimerProbe
 from battery_predictor.nodes.messages import (
     fill_feasible_tasks_response,

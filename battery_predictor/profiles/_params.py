@@ -1,93 +1,16 @@
-"""Locate and read the params YAML files of the profile generators."""
+"""Old import path of :mod:`battery_predictor.config` (the params-file locator and YAML checks).
 
-from __future__ import annotations
+Kept only for ``prediction/station_services.py`` and ``lab/experiments.py``, whose owners move
+their imports to :mod:`battery_predictor.config`; delete this module then.
+"""
 
-import math
-import os
-import sys
-from collections.abc import Mapping
-from pathlib import Path
-from typing import Any
+from battery_predictor.config import (
+    as_float,
+    as_float_list,
+    check_unknown,
+    default_params_file,
+    read_yaml_mapping,
+    require,
+)
 
-import yaml
-
-from battery_predictor.errors import ParamsError
-
-PACKAGE = "battery_predictor"
-
-
-def default_params_file(filename: str) -> Path:
-    """Path of a shipped params file.
-
-    Looks in the source tree (``<repo>/params``) first, then in
-    ``<prefix>/share/battery_predictor/params`` for every prefix on
-    ``AMENT_PREFIX_PATH`` and for ``sys.prefix`` (where ``setup.py`` installs
-    the data files). Returns the source-tree path when nothing is found, so
-    the error message names the expected location.
-    """
-    source_tree = Path(__file__).resolve().parents[2] / "params" / filename
-    candidates = [source_tree]
-    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
-    prefixes.append(sys.prefix)
-    candidates += [Path(prefix) / "share" / PACKAGE / "params" / filename for prefix in prefixes]
-    for candidate in candidates:
-        if candidate.is_file():
-            return candidate
-    return source_tree
-
-
-def read_yaml_mapping(path: str | Path) -> tuple[Path, dict[str, Any]]:
-    """Read a YAML file whose top level is a mapping; ParamsError otherwise."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ParamsError(f"{path}: cannot read params file ({exc.strerror})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ParamsError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
-    if not isinstance(data, dict):
-        raise ParamsError(f"{path}: top level must be a mapping of keys")
-    return path, data
-
-
-def require(mapping: Mapping[str, Any], key: str, path: Path, where: str) -> Any:
-    """``mapping[key]`` or a ParamsError naming the file and the dotted key."""
-    if not isinstance(mapping, Mapping):
-        raise ParamsError(f"{path}: {where or 'top level'} must be a mapping")
-    if key not in mapping:
-        raise ParamsError(f"{path}: missing key {_join(where, key)}")
-    return mapping[key]
-
-
-def check_unknown(mapping: Mapping[str, Any], allowed: set[str], path: Path, where: str) -> None:
-    """Reject keys not in ``allowed`` (catches typos such as ``lenght_m``)."""
-    unknown = sorted(set(mapping) - allowed)
-    if unknown:
-        raise ParamsError(f"{path}: unknown key {_join(where, str(unknown[0]))} (allowed: {', '.join(sorted(allowed))})")
-
-
-def as_float(value: Any, path: Path, key: str, *, minimum: float | None = None, strict: bool = False) -> float:
-    """Convert to a finite float, optionally ``>= minimum`` (``> minimum`` if strict)."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ParamsError(f"{path}: {key} must be a number, got {value!r}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise ParamsError(f"{path}: {key} must be finite, got {value!r}")
-    if minimum is not None and (number <= minimum if strict else number < minimum):
-        relation = ">" if strict else ">="
-        raise ParamsError(f"{path}: {key} must be {relation} {minimum:g}, got {number:g}")
-    return number
-
-
-def as_float_list(value: Any, path: Path, key: str, *, minimum: float | None = None, strict: bool = False,
-                  min_length: int = 2) -> list[float]:
-    """Convert a YAML list to finite floats (each checked like :func:`as_float`)."""
-    if not isinstance(value, list) or len(value) < min_length:
-        raise ParamsError(f"{path}: {key} must be a list of at least {min_length} numbers")
-    return [as_float(v, path, f"{key}[{i}]", minimum=minimum, strict=strict) for i, v in enumerate(value)]
-
-
-def _join(where: str, key: str) -> str:
-    return f"{where}.{key}" if where else key
+__all__ = ["as_float", "as_float_list", "check_unknown", "default_params_file", "read_yaml_mapping", "require"]

@@ -30,8 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from battery_predictor.errors import ParamsError, ProfileError
-from battery_predictor.profiles._params import (
+from battery_predictor.config import (
     as_float,
     as_float_list,
     check_unknown,
@@ -39,6 +38,7 @@ from battery_predictor.profiles._params import (
     read_yaml_mapping,
     require,
 )
+from battery_predictor.errors import ParamsError, ProfileError
 from battery_predictor.profiles.kde import BoundedKde
 from battery_predictor.profiles.load_profile import LoadProfile, constant_current_profile
 from battery_predictor.profiles.station import FLAT, SLOPES, Station, check_slope

@@ -18,14 +18,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from battery_predictor.errors import ParamsError, ProfileError
-from battery_predictor.profiles._params import (
+from battery_predictor.config import (
     as_float,
     check_unknown,
     default_params_file,
     read_yaml_mapping,
     require,
 )
+from battery_predictor.errors import ParamsError, ProfileError
 
 FLAT = "flat"
 UPHILL = "uphill"

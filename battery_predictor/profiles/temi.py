@@ -24,8 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from battery_predictor.errors import ParamsError, ProfileError
-from battery_predictor.profiles._params import (
+from battery_predictor.config import (
     as_float,
     as_float_list,
     check_unknown,
@@ -33,6 +32,7 @@ from battery_predictor.profiles._params import (
     read_yaml_mapping,
     require,
 )
+from battery_predictor.errors import ParamsError, ProfileError
 from battery_predictor.profiles.kde import BoundedKde
 from battery_predictor.profiles.load_profile import LoadProfile
 
