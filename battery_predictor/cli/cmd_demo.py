@@ -149,18 +149,9 @@ def _plan_route(session) -> list[str]:
 
 
 def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -> None:
-    from battery_predictor.cli.common import bag_progress, bag_step, progress_wanted
-    from battery_predictor.io.paths import portable_paths
-    from battery_predictor.nodes.replay_session import ReplaySession
-    from battery_predictor.replay import (
-        DEFAULT_CHECKPOINTS_MIN,
-        OutputBag,
-        compare_at_checkpoints,
-        error_summary,
-        plot_runtime,
-        read_replay_stream,
-        runtime_truth,
-    )
+    from battery_predictor.cli.common import progress_wanted, replay_progress
+    from battery_predictor.nodes.replay_run import replay_into_nodes
+    from battery_predictor.replay import DEFAULT_CHECKPOINTS_MIN, error_summary, read_replay_stream, runtime_truth
 
     stream = read_replay_stream(bag)
     truth = runtime_truth(stream.metadata)
@@ -170,24 +161,18 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
     print(f"   {stream.style} topics, {len(stream.messages)} messages over {stream.duration_s / 60:.0f} min; "
           + (f"truth: {truth.stop_voltage_v:.2f} V reached after {truth.runtime_s / 60:.1f} min" if truth else
              "no runtime truth in this bag"), flush=True)
-    output = OutputBag(out / "temi_outputs", metadata=portable_paths({"replay_of": str(bag), "params": str(params)}))
-    try:
-        with ReplaySession(stream, context=context, params_file=str(params), rate=rate, out_bag=output,
-                           predictor_overrides={"runtime_period_s": runtime_period_s}) as session:
-            # the checkpoints (30..300 min, as the paper's 5.1.6) need the bag only up to the last one
-            last_s = 60.0 * max(DEFAULT_CHECKPOINTS_MIN) + runtime_period_s
-            end_ns = stream.ros_time_ns(last_s) if truth and truth.runtime_s > last_s else None
-            with bag_progress(stream, end_ns, "   replay", enabled=progress_wanted()) as update:
-                stats = session.play_until(end_ns, on_step=bag_step(update, stream))
-            session.flush()
-            points = session.runtime_points()
-            rejected = session.monitor.monitor.rejected_total
-            task_lines = _feasible_tasks(session, (session.now_ns() - stream.start_ns) / 6e10)
-    finally:
-        output.close()
-    checkpoints = compare_at_checkpoints(points, truth) if truth else []
-    png = plot_runtime(points, truth, out / "temi_remaining_runtime.png", checkpoints=checkpoints,
-                       title=f"{bag.name}: /remaining_runtime vs truth")
+    # the checkpoints (30..300 min, as the paper's 5.1.6) need the bag only up to the last one
+    last_s = 60.0 * max(DEFAULT_CHECKPOINTS_MIN) + runtime_period_s
+    result = replay_into_nodes(
+        stream, context=context, params_file=params, out_bag=out / "temi_outputs",
+        bag_metadata={"replay_of": str(bag), "params": str(params)}, plot=out / "temi_remaining_runtime.png",
+        plot_title=f"{bag.name}: /remaining_runtime vs truth", rate=rate,
+        overrides={"runtime_period_s": runtime_period_s},
+        end_ns=stream.ros_time_ns(last_s) if truth and truth.runtime_s > last_s else None,
+        progress=lambda end_ns: replay_progress(stream, end_ns, "   replay", enabled=progress_wanted()),
+        while_open=lambda session: _feasible_tasks(session, (session.now_ns() - stream.start_ns) / 6e10))
+    stats, points, checkpoints, png = result.stats, result.points, result.checkpoints, result.plot
+    rejected, task_lines = result.rejected_total, result.during
     print(f"   played {stats.bag_s / 60:.0f} bag min in {stats.wall_s:.0f} s; {sum(p.valid for p in points)} valid predictions, "
           f"{rejected} samples rejected by the monitor")
     if checkpoints:
@@ -210,7 +195,7 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
 def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
     from battery_predictor_msgs.srv import CanAcceptRoute
 
-    from battery_predictor.cli.common import bag_progress, bag_step, progress_wanted
+    from battery_predictor.cli.common import progress_wanted, replay_progress
     from battery_predictor.nodes.messages import route_section_msgs
     from battery_predictor.nodes.replay_session import ReplaySession
     from battery_predictor.profiles.ranger import longest_route
@@ -221,8 +206,8 @@ def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
     with ReplaySession(stream, context=context, params_file=str(params), rate=rate,
                        predictor_overrides={"runtime_period_s": 600.0}) as session:
         end_ns = stream.ros_time_ns(at_min * 60.0)
-        with bag_progress(stream, end_ns, "   replay", enabled=progress_wanted()) as update:
-            session.play_until(end_ns, on_step=bag_step(update, stream))
+        with replay_progress(stream, end_ns, "   replay", enabled=progress_wanted()) as on_step:
+            session.play_until(end_ns, on_step=on_step)
         state = session.predictor.route_core.latest_state()
         print(f"2) luggage robot (Ranger Mini): {bag.name} replayed to {at_min:g} min "
               f"({params.relative_to(REPO)})")

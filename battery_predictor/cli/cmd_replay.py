@@ -49,18 +49,11 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     import rclpy
 
     from battery_predictor.cli._ros_params import check_node_params_file
-    from battery_predictor.cli.common import bag_progress, bag_step, check_output_dir, progress_wanted
+    from battery_predictor.cli.common import check_output_dir, progress_wanted, replay_progress
     from battery_predictor.errors import InputDataError
-    from battery_predictor.io.paths import portable_paths
-    from battery_predictor.nodes.replay_session import ReplaySession, default_output_dir
-    from battery_predictor.replay import (
-        OutputBag,
-        compare_at_checkpoints,
-        error_summary,
-        plot_runtime,
-        read_replay_stream,
-        runtime_truth,
-    )
+    from battery_predictor.nodes.replay_run import replay_into_nodes
+    from battery_predictor.nodes.replay_session import default_output_dir
+    from battery_predictor.replay import error_summary, read_replay_stream, runtime_truth
 
     check_node_params_file(params, pack=pack)
     if not (rate >= 0 and not math.isnan(rate)):
@@ -80,35 +73,26 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
         overrides["params_file"] = str(pack)
     if runtime_period_s is not None:
         overrides["runtime_period_s"] = float(runtime_period_s)
+    name = Path(stream.source).name
+    title = (f"{name}: predicted vs true remaining runtime" if runtime_truth(stream.metadata)
+             else f"{name}: predicted remaining runtime")
 
     own_context = context is None
     if own_context:
         rclpy.init(args=["battery-predictor"])
-    output = OutputBag(bag_out, metadata=portable_paths({"replay_of": str(bag), "params": str(params), "rate": rate}))
     try:
         if not quiet:
             print(f"replay: {stream.source}: {stream.style} topics {', '.join(stream.topics)}, "
                   f"{len(stream.messages)} messages over {stream.duration_s / 60:.1f} min"
                   + (f", at most {rate:g}x" if rate > 0 else ", as fast as possible"), flush=True)
-        with ReplaySession(stream, context=context, params_file=params, predictor_overrides=overrides, rate=rate,
-                           out_bag=output) as session:
-            with bag_progress(stream, None, "replay", enabled=not quiet and progress_wanted()) as update:
-                stats = session.play_until(on_step=bag_step(update, stream))
-            session.flush()
-            points = session.runtime_points()
-            n_states = len(session.pack_states())
-            diag_levels = [s.level[0] if isinstance(s.level, bytes) else int(s.level)
-                           for d in session.diagnostics() for s in d.status]
-            rejected = dict(session.monitor.monitor.rejected)
+        result = replay_into_nodes(
+            stream, context=context, params_file=params, out_bag=bag_out, plot=png, plot_title=title, rate=rate,
+            bag_metadata={"replay_of": str(bag), "params": str(params), "rate": rate}, overrides=overrides,
+            progress=lambda end_ns: replay_progress(stream, end_ns, "replay", enabled=not quiet and progress_wanted()))
     finally:
-        output.close()
         if own_context:
             rclpy.try_shutdown()
-    truth = runtime_truth(stream.metadata)
-    checkpoints = compare_at_checkpoints(points, truth) if truth else []
-    title = f"{Path(stream.source).name}: predicted vs true remaining runtime" if truth else \
-        f"{Path(stream.source).name}: predicted remaining runtime"
-    plot_runtime(points, truth, png, title=title, checkpoints=checkpoints)
+    stats, points, truth, checkpoints = result.stats, result.points, result.truth, result.checkpoints
     summary = {
         "bag": stream.source,
         "output_bag": str(bag_out),
@@ -117,11 +101,11 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
         "messages": stats.messages,
         "bag_s": stats.bag_s,
         "wall_s": stats.wall_s,
-        "pack_states": n_states,
+        "pack_states": result.pack_states,
         "runtime_messages": len(points),
         "valid_runtime_messages": sum(p.valid for p in points),
-        "rejected_samples": rejected,
-        "max_diagnostic_level": max(diag_levels, default=0),
+        "rejected_samples": result.rejected,
+        "max_diagnostic_level": max(result.diagnostic_levels, default=0),
         "truth_runtime_min": truth.runtime_s / 60 if truth else None,
         "checkpoints": [{"checkpoint_min": c.checkpoint_min, "prediction_time_min": c.time_s / 60,
                          "predicted_min": c.predicted_min, "true_min": c.true_min, "error_min": c.error_min}

@@ -146,6 +146,13 @@ def bag_step(update: Callable[[float], None], stream) -> Callable[[int], None]:
     return lambda t_ns: update(round((t_ns - stream.start_ns) / 60e9, 1))
 
 
+@contextlib.contextmanager
+def replay_progress(stream, end_ns: int | None, desc: str, *, enabled: bool) -> Iterator[Callable[[int], None]]:
+    """A :func:`bag_progress` bar over a replay up to ``end_ns``; yields its ``on_step(t_ns)``."""
+    with bag_progress(stream, end_ns, desc, enabled=enabled) as update:
+        yield bag_step(update, stream)
+
+
 #: A progress bar appears only once its wait has lasted this long, s.
 PROGRESS_DELAY_S = 2.0
 
