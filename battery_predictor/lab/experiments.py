@@ -174,8 +174,8 @@ def find_experiments(names: Iterable[str] | None) -> list[ExperimentSpec]:
 
 def load_robot_params(robot: str, params_dir: str | Path | None = None):
     """The params file of ``robot`` (``params/<robot>.yaml``)."""
+    from battery_predictor.config import default_params_file
     from battery_predictor.params import load_params
-    from battery_predictor.profiles._params import default_params_file
 
     path = Path(params_dir) / f"{robot}.yaml" if params_dir else default_params_file(f"{robot}.yaml")
     return load_params(path)

@@ -15,10 +15,10 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from battery_predictor.config import default_params_file, read_yaml_mapping
 from battery_predictor.errors import BatteryPredictorError, ParamsError
 from battery_predictor.prediction.planning import PlanRequest, RoutePlan, RoutePlanner, plan_from_core
 from battery_predictor.prediction.tasks import Task, TaskLoads, TaskPlan, feasible_tasks, invalid_plan
-from battery_predictor.profiles._params import default_params_file, read_yaml_mapping
 from battery_predictor.profiles.station import load_station
 from battery_predictor.profiles.temi import default_config_path, load_usage_config
 
