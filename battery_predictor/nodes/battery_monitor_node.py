@@ -18,7 +18,7 @@ Outputs: ``battery_predictor_msgs/PackState`` on ``pack_state_topic`` (reliable,
 one per closed averaging window, plus stale states while the input is stale) and
 ``diagnostic_msgs/DiagnosticArray`` on ``/diagnostics`` every
 ``diagnostics_period_s`` (OK / WARN stale / ERROR invalid, with rejection
-counts). Validation, windows and staleness are :mod:`battery_predictor.monitoring`.
+counts). Validation, windows and staleness are :mod:`battery_predictor.monitor.core`.
 
 Time is the node's ROS clock (``use_sim_time`` follows ``/clock``, as a replay publishes it).
 """
@@ -38,7 +38,7 @@ from std_msgs.msg import Float64
 
 from battery_predictor.config import resolve_params_file
 from battery_predictor.conventions import battery_state_current_to_internal, celsius_to_kelvin
-from battery_predictor.monitoring import STYLES, BatteryMonitor, MonitorConfig, PackSnapshot
+from battery_predictor.monitor.core import STYLES, BatteryMonitor, MonitorConfig, PackSnapshot
 from battery_predictor.nodes._params import declare_float, declare_str, reject_undeclared
 from battery_predictor.nodes._sync import TimerProbe
 from battery_predictor.nodes.messages import pack_state_msg, stamp_to_s

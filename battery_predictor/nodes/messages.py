@@ -17,7 +17,7 @@ from battery_predictor_msgs.srv import CanAcceptRoute, FeasibleTasks, PlanRoute
 from builtin_interfaces.msg import Time
 
 from battery_predictor.errors import BatteryPredictorError, RequestError
-from battery_predictor.monitoring import PackSnapshot
+from battery_predictor.monitor.core import PackSnapshot
 from battery_predictor.prediction.core import RuntimeStatus
 from battery_predictor.prediction.planning import CHARGE_FIRST, LEAST_CHARGE_PATH, SHORTEST, PlanRequest, RoutePlan
 from battery_predictor.prediction.route import MAX_SECTIONS, RouteDecision

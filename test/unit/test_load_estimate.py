@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from battery_predictor.io.loader import load_recording
-from battery_predictor.monitoring import monitor_windows
+from battery_predictor.monitor.core import monitor_windows
 from battery_predictor.prediction.load_estimate import LoadEstimator
 
 PANASONIC = Path(__file__).resolve().parents[3] / "shared" / "data" / "panasonic_18650pf"

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from battery_predictor.monitoring import ERROR, OK, REASONS, WARN, BatteryMonitor, MonitorConfig
+from battery_predictor.monitor.core import ERROR, OK, REASONS, WARN, BatteryMonitor, MonitorConfig
 
 T0 = 1_704_067_200.0  # 2024-01-01T00:00:00Z, a multiple of the 5 s window
 
@@ -232,7 +232,7 @@ def test_random_garbage_never_reaches_the_averages():
 
 
 def test_windows_carry_their_largest_sample_current_and_offline_windows_match_the_monitor():
-    from battery_predictor.monitoring import monitor_windows
+    from battery_predictor.monitor.core import monitor_windows
 
     t = np.arange(0.0, 20.0, 1.0)
     i = np.array([1.0, 3.0, 2.0, -1.0, 1.5] * 4)
