@@ -53,7 +53,8 @@ class FitValidation:
     val_result: object = field(repr=False, default=None)
 
 
-def _score(params: PackParams, rec: Recording):
+def score_fit(params: PackParams, rec: Recording):
+    """R2_mod of ``params`` on ``rec`` (fast simulator, the params' initial state) and the simulation."""
     sim = get_simulator("fast")
     res = sim.simulate(params, request_for_recording(params, rec, initial_state="params",
                                                      extend_s=0.2 * rec.duration_s))
@@ -91,8 +92,8 @@ def table2(start: PackParams, dynamic: Recording, static: Recording, *, base_set
             try:
                 fitted, names, _ = fit_pack(params, [opt_rec], trials=trials, seed=seed, storage=storage,
                                             workers=workers)
-                opt_r2, opt_res = _score(fitted, opt_rec)
-                val_r2, val_res = _score(fitted, val_rec)
+                opt_r2, opt_res = score_fit(fitted, opt_rec)
+                val_r2, val_res = score_fit(fitted, val_rec)
             except BatteryPredictorError as exc:
                 if progress:
                     progress(f"{base} {opt_name}: failed: {exc}")
