@@ -1,7 +1,7 @@
 """Remaining runtime on measured recordings: the predictor's core against naive Coulomb counters.
 
 Each recording is turned into the 5 s window averages the battery monitor publishes
-(:func:`~battery_predictor.monitoring.monitor_windows`) and fed, window by window, to a
+(:func:`~battery_predictor.monitor.core.monitor_windows`) and fed, window by window, to a
 :class:`~battery_predictor.prediction.core.PredictorCore` at its default settings, exactly as the
 predictor node feeds it. At each checkpoint (a fraction of the discharge's duration) the core's
 remaining runtime is compared with the truth, and so is each counter's.
@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from battery_predictor.errors import InputDataError
-from battery_predictor.monitoring import MonitorConfig, monitor_windows
+from battery_predictor.monitor.core import MonitorConfig, monitor_windows
 from battery_predictor.params import PackParams
 from battery_predictor.prediction.core import PredictorConfig, PredictorCore
 from battery_predictor.recording import Recording
