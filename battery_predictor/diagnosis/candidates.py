@@ -157,9 +157,9 @@ Baseline = Candidate
 class Temperature(Candidate):
     """What a cold (or warm) cell does differently, with the physics measured cells show.
 
-    * **Accessible capacity** (equilibrium, at any rate): the positive electrode's stoichiometry window
-      narrows in the cold, a fitted fraction per kelvin below 298.15 K (``window_loss_per_k``,
-      :func:`~battery_predictor.diagnosis.extensions_impl.cold_window_scale`): the lithiated end of the
+    * **Accessible capacity** (equilibrium, at any rate): both electrodes' stoichiometry windows narrow
+      in the cold, a fitted fraction per kelvin below the anchor temperature (``window_loss_per_k``,
+      :func:`~battery_predictor.diagnosis.extensions_impl.cold_window_scale`): the discharged end of each
       window becomes inaccessible, so the discharge reaches its knee earlier even at 0.1C (the LG M50
       cells deliver 5 % less at 10 degC and 10 % less at 0 degC at 0.1C, docs/findings.md), and the cell
       gets the capacity back as it warms (self-heating follows the measured temperature).
@@ -169,20 +169,25 @@ class Temperature(Candidate):
       lithiation (``EA_POS_FULL``); fitted here it extrapolated badly on held-out data
       (docs/findings.md), so the candidate does not fit it.
     * **Ohmic transport and kinetics**: the cell resistance the SPM lacks (electrolyte, SEI), Arrhenius
-      with 30 kJ/mol; only its excess over 298.15 K is added (the identified model already carries the
-      reference temperature's drop), so it grows in the cold and shrinks as the cell warms. Its one
-      fitted value is the resistance at 298.15 K. The exchange-current densities keep the base set's
+      with 30 kJ/mol; only its excess over the anchor temperature is added (the identified model already
+      carries the reference cells' drop), so it grows in the cold and shrinks as the cell warms. Its one
+      fitted value is the resistance at the anchor. The exchange-current densities keep the base set's
       own Arrhenius factor (an extra activation energy, ``EA_KINETICS``, fitted to ~0 on the Panasonic
       cell, docs/findings.md).
     * **Self-heating**: the cell follows its measured temperature; without one, a lumped thermal
       model from the first temperature with a fitted heat transfer coefficient.
 
-    At the reference temperature (298.15 K) every factor is 1: the extension changes nothing on the
-    reference data, only where the temperature differs.
+    At the anchor temperature every factor is 1. The anchor (``Temperature extension anchor temperature
+    [K]`` in the params, set by the diagnosis from measured references,
+    :func:`~battery_predictor.diagnosis.diagnose.with_reference_anchor`; 298.15 K otherwise) is the mean
+    measured temperature at the end of the reference discharges: the identified model carries the
+    accessible capacity the reference cells had there (LG M50 25 degC references self-heat to 26-57 degC
+    by their knee). The diffusivities keep the base set's reference temperature (they are not identified).
     """
 
     name = "temperature"
-    title = ("positive stoichiometry window narrowing in the cold (accessible capacity at any rate), Arrhenius "
+    title = ("both electrodes' stoichiometry windows narrowing below the references' end-of-discharge temperature "
+             "(accessible capacity at any rate), Arrhenius "
              "solid diffusion and Arrhenius cell resistance (fitted), the cell following its measured temperature "
              "(or, unmeasured, a lumped thermal model with a fitted heat transfer coefficient: self-heating)")
     signature = ("temperature", "current")
@@ -193,8 +198,8 @@ class Temperature(Candidate):
 
     def parameters(self, params, observed=None):
         out = (CandParam("diffusivity_activation_energy_J_mol", 0.0, 80000.0, 25000.0, unit="J/mol"),
-               CandParam("cold_resistance_ohm", 1e-5, 0.2, 2e-3, log=True, unit="Ohm per cell at 298.15 K"),
-               CandParam("window_loss_per_k", 0.0, 0.02, 0.002, unit="1/K below 298.15 K"))
+               CandParam("cold_resistance_ohm", 1e-5, 0.2, 2e-3, log=True, unit="Ohm per cell at the anchor temperature"),
+               CandParam("window_loss_per_k", 0.0, 0.02, 0.002, unit="1/K below the anchor temperature"))
         if observed is not None and all(self._measured(o) for o in observed):
             return out
         return out + (CandParam("heat_transfer_coefficient_W_m2K", 0.5, 200.0, 10.0, log=True, unit="W/m2/K"),)
@@ -215,7 +220,8 @@ class Temperature(Candidate):
                   ext.COLD_WINDOW: theta.get("window_loss_per_k", 0.0)}
         if "heat_transfer_coefficient_W_m2K" in theta:
             values[ext.HEAT_TRANSFER] = theta["heat_transfer_coefficient_W_m2K"]
-        return {"values": values, "post": Post(cold_resistance_ohm=theta["cold_resistance_ohm"])}
+        return {"values": values, "post": Post(cold_resistance_ohm=theta["cold_resistance_ohm"],
+                                               anchor_k=ext.extension_value(params, ext.ANCHOR_TEMPERATURE))}
 
     def simulate(self, engine, params, obs, theta, soc, t_end=None, want_temperature=False):
         measured = self._measured(obs)
@@ -236,7 +242,8 @@ class Temperature(Candidate):
                   ext.EA_POS: theta["diffusivity_activation_energy_J_mol"],
                   ext.COLD_RESISTANCE: theta["cold_resistance_ohm"],
                   ext.EA_POS_FULL: theta.get("full_lithiation_activation_energy_J_mol", 0.0),
-                  ext.COLD_WINDOW: theta.get("window_loss_per_k", 0.0)}
+                  ext.COLD_WINDOW: theta.get("window_loss_per_k", 0.0),
+                  ext.ANCHOR_TEMPERATURE: ext.extension_value(params, ext.ANCHOR_TEMPERATURE)}
         if "heat_transfer_coefficient_W_m2K" in theta:  # fitted without a measured temperature: self-heating
             values[ext.HEAT_TRANSFER] = theta["heat_transfer_coefficient_W_m2K"]
         return self._with_extension(params, values)

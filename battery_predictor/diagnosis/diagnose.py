@@ -554,6 +554,34 @@ def auto_split(obs: Sequence[Observed]) -> str:
     return "recordings" if len(obs) * steps <= MAX_FOLD_STEPS else "time"
 
 
+def with_reference_anchor(params: PackParams, refs: Sequence[Observed]) -> PackParams:
+    """``params`` (identified on ``refs``) with the temperature at which they hold, for the ``temperature`` candidate.
+
+    The identified model carries the accessible capacity the reference cells had where their discharges
+    ended (:func:`~battery_predictor.diagnosis.extensions_impl.reference_anchor_k`: LG M50 25 degC
+    references 0.1C..2C end at 26-57 degC, anchor 36.4 degC); the extension ``temperature`` changes
+    nothing at that temperature. Unchanged (anchor 298.15 K) when a reference has no measured temperature.
+
+    Parameters
+    ----------
+    params : PackParams
+        The reference-identified params.
+    refs : sequence of Observed
+        The reference recordings (measured temperature in K, current in A, discharge positive).
+
+    Returns
+    -------
+    PackParams
+        ``params`` with ``Temperature extension anchor temperature [K]`` in ``cell.extra``.
+    """
+    from battery_predictor.diagnosis import extensions_impl as ext
+
+    if not refs or any(r.temperature_k is None for r in refs):
+        return params
+    anchor_k = ext.reference_anchor_k([r.temperature_k for r in refs], [r.i for r in refs])
+    return replace(params, extra={**params.extra, ext.ANCHOR_TEMPERATURE: anchor_k})
+
+
 def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequence[Recording] = (), *,
              budget: int = DEFAULT_BUDGET, reference_budget: int = DEFAULT_REFERENCE_BUDGET,
              fit_fraction: float = 0.6, causes: Sequence[str] | None = None, seed: int = 0,
@@ -605,6 +633,7 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
     if references:
         refs = [observe(r, params, fit_fraction=0.95, name=str(r.source)) for r in references]
         params, reference = identify_reference(params, references, reference_budget, seed, progress)
+        params = with_reference_anchor(params, refs)
     obs = [observe(r, params, fit_fraction=fit_fraction, name=str(r.source)) for r in observed]
     if reference is not None:
         refusal = reference_verdict(reference, 1e3 * noise_level_v(refs))

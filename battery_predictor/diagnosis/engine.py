@@ -304,8 +304,10 @@ class Post:
     weak_fraction : float
         Capacity fraction of the weak series group (1 = none).
     cold_resistance_ohm : float
-        Arrhenius cell resistance at 298.15 K (Ohm per cell): its excess at the cell temperature
+        Arrhenius cell resistance at ``anchor_k`` (Ohm per cell): its excess at the cell temperature
         (:func:`~battery_predictor.diagnosis.extensions_impl.cold_resistance_excess_ohm`) drops each cell's voltage.
+    anchor_k : float
+        Temperature (K) at which ``cold_resistance_ohm`` adds nothing (where the identified model holds).
     series_activation_j_mol : float
         Arrhenius activation energy of the pack's series resistance ``R_eq`` (fitted at the
         reference temperature): at cell temperature T it is ``R_eq exp(E/R (1/T - 1/T_ref))``.
@@ -315,6 +317,7 @@ class Post:
     weak_fraction: float = 1.0
     series_activation_j_mol: float = 0.0
     cold_resistance_ohm: float = 0.0
+    anchor_k: float = 298.15
 
 
 # --------------------------------------------------------------------------- engine
@@ -559,7 +562,7 @@ class Engine:
         if post.cold_resistance_ohm:
             from battery_predictor.diagnosis.extensions_impl import cold_resistance_excess_ohm
 
-            drop = i_cell * cold_resistance_excess_ohm(post.cold_resistance_ohm, temp)
+            drop = i_cell * cold_resistance_excess_ohm(post.cold_resistance_ohm, temp, post.anchor_k)
             v_cells = [v - drop for v in v_cells]
         r_eq_t = r_eq
         if post.series_activation_j_mol:

@@ -19,7 +19,7 @@ extension                  what it changes
                            series resistance ``R_eq`` the reference fit found (``Series resistance
                            activation energy [J.mol-1]``; :func:`series_resistance_factor`, applied by
                            the fast simulator and the predictor's runner); a stoichiometry window of
-                           both electrodes that narrows below 298.15 K and widens above it
+                           both electrodes that narrows below the anchor temperature and widens above it
                            (:data:`COLD_WINDOW`, :func:`cold_window_scale`: an accessible capacity
                            that follows the temperature at any rate). The cell is isothermal at
                            the given (measured) temperature, as the predictor runs at the last
@@ -74,19 +74,26 @@ EA_KINETICS = "Exchange-current density extra activation energy [J.mol-1]"
 EA_POS_FULL = "Positive particle diffusivity extra activation energy at full lithiation [J.mol-1]"
 #: Stoichiometry above which :data:`EA_POS_FULL` starts to act.
 LITHIATION_ONSET = 0.5
-#: Ohmic cell resistance that follows Arrhenius (electrolyte, SEI) and that the SPM lacks, stated at
-#: 298.15 K (Ohm per cell). Only its *excess* over 298.15 K is added, ``R (exp(E/R (1/T - 1/T_ref)) - 1)``:
-#: at the reference temperature the identified model is unchanged.
+#: Ohmic cell resistance that follows Arrhenius (electrolyte, SEI) and that the SPM lacks, stated at the anchor
+#: temperature (Ohm per cell; :data:`ANCHOR_TEMPERATURE`, 298.15 K when absent - the key keeps its name).
+#: Only its *excess* over the anchor is added, ``R (exp(E/R (1/T - 1/T_anchor)) - 1)``: at the anchor the
+#: identified model is unchanged.
 COLD_RESISTANCE = "Arrhenius cell resistance at 298.15 K [Ohm]"
 #: Activation energy of :data:`COLD_RESISTANCE` (J/mol): 30 kJ/mol, between the electrolyte's ionic
 #: conductivity (10-20 kJ/mol) and the SEI / charge transfer (50-70 kJ/mol) of graphite cells.
 COLD_RESISTANCE_ACTIVATION_J_MOL = 30000.0
 #: Fraction of both electrodes' stoichiometry windows (from the charged end, 100 % SOC, towards the
-#: discharged end) that becomes inaccessible per kelvin below 298.15 K (1/K): the cell's accessible capacity
+#: discharged end) that becomes inaccessible per kelvin below the anchor temperature (1/K;
+#: :data:`ANCHOR_TEMPERATURE`, 298.15 K when absent - the key keeps its name): the cell's accessible capacity
 #: falls in the cold at any rate, whichever electrode ends the discharge. See :func:`cold_window_scale`.
 COLD_WINDOW = "Stoichiometry window loss per kelvin below 298.15 K [K-1]"
-#: Reference temperature (K) of :data:`COLD_WINDOW` and :data:`COLD_RESISTANCE`.
+#: Default reference temperature (K) of :data:`COLD_WINDOW` and :data:`COLD_RESISTANCE`, used when the params
+#: carry no :data:`ANCHOR_TEMPERATURE`.
 COLD_REFERENCE_K = 298.15
+#: Temperature (K) at which the identified model holds, where the window and the Arrhenius cell resistance of
+#: the extension ``temperature`` change nothing: the diagnosis sets it from the reference recordings
+#: (:func:`reference_anchor_k`); :data:`COLD_REFERENCE_K` when absent.
+ANCHOR_TEMPERATURE = "Temperature extension anchor temperature [K]"
 HEAT_TRANSFER = "Total heat transfer coefficient [W.m-2.K-1]"
 CONTACT_RESISTANCE = "Contact resistance [Ohm]"
 CURRENT_OFFSET = "Current sensor offset [A]"
@@ -116,7 +123,7 @@ _OPTIONS = {
 #: the hysteresis, whose neutral value would be no hysteresis).
 EXTENSION_DEFAULTS: dict[str, dict[str, float]] = {
     "temperature": {EA_NEG: 0.0, EA_POS: 0.0, EA_SERIES: 0.0, EA_KINETICS: 0.0, EA_POS_FULL: 0.0, COLD_RESISTANCE: 0.0,
-                    COLD_WINDOW: 0.0},
+                    COLD_WINDOW: 0.0, ANCHOR_TEMPERATURE: COLD_REFERENCE_K},
     "resistance_growth": {CONTACT_RESISTANCE: 0.0},
     "current_offset": {CURRENT_OFFSET: 0.0},
     "cell_imbalance": {WEAK_FRACTION: 1.0},
@@ -161,7 +168,8 @@ def series_resistance_factor(params, temperature_k):
     """Arrhenius factor of the pack's series resistance ``R_eq`` at ``temperature_k`` (1 without the extension).
 
     The extension ``temperature`` makes the series resistance the reference fit found (interconnect
-    plus the cell's ohmic part the SPM lacks) follow ``exp(E/R (1/T - 1/T_ref))``, T_ref = 298.15 K.
+    plus the cell's ohmic part the SPM lacks) follow ``exp(E/R (1/T - 1/T_ref))``, T_ref = 298.15 K, and
+    adds the Arrhenius cell resistance's excess over the anchor temperature (:data:`ANCHOR_TEMPERATURE`).
     """
     import numpy as np
 
@@ -178,16 +186,63 @@ def series_resistance_factor(params, temperature_k):
         r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, ic["r_b_ohm"], ic["r_c_ohm"],
                                                  ic["r_t_ohm"])
         if r_eq > 0:
-            factor = factor + params.series / params.parallel * cold_resistance_excess_ohm(r_cold, temperature_k) / r_eq
+            excess = cold_resistance_excess_ohm(r_cold, temperature_k, extension_value(params, ANCHOR_TEMPERATURE))
+            factor = factor + params.series / params.parallel * excess / r_eq
     return factor
 
 
-def cold_resistance_excess_ohm(r_ref_ohm: float, temperature_k):
-    """Excess of the Arrhenius cell resistance over its 298.15 K value (Ohm per cell, 0 above 298.15 K's value)."""
+def cold_resistance_excess_ohm(r_ref_ohm: float, temperature_k, anchor_k: float = COLD_REFERENCE_K):
+    """Excess of the Arrhenius cell resistance over its value at the anchor temperature (Ohm per cell).
+
+    Parameters
+    ----------
+    r_ref_ohm : float
+        The cell resistance at ``anchor_k`` (Ohm per cell) that follows Arrhenius with
+        :data:`COLD_RESISTANCE_ACTIVATION_J_MOL`.
+    temperature_k : float or numpy.ndarray
+        Cell temperature (K).
+    anchor_k : float
+        Temperature (K) at which the identified model holds (:data:`ANCHOR_TEMPERATURE`): the excess is 0
+        there, positive below, negative above.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``R (exp(E/R (1/T - 1/T_anchor)) - 1)`` in Ohm per cell.
+    """
+    from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
+
+    return r_ref_ohm * (arrhenius_factor(temperature_k, COLD_RESISTANCE_ACTIVATION_J_MOL, float(anchor_k)) - 1.0)
+
+
+def reference_anchor_k(temperature_traces_k, currents_a) -> float:
+    """The anchor temperature of the extension ``temperature`` from the reference recordings (K).
+
+    The identified model's accessible capacity is set where each reference discharge ended, at the
+    temperature the cell had then (a 2C reference self-heats by 30 K before its knee): the anchor is
+    the mean, over the reference recordings, of the measured temperature at each one's last
+    discharging sample (current above 1 % of its largest discharge current).
+
+    Parameters
+    ----------
+    temperature_traces_k : sequence of numpy.ndarray
+        Each reference recording's measured temperature (K).
+    currents_a : sequence of numpy.ndarray
+        Each reference recording's current (A, discharge positive).
+
+    Returns
+    -------
+    float
+        The anchor temperature in K.
+    """
     import numpy as np
 
-    t = np.asarray(temperature_k, dtype=float)
-    return r_ref_ohm * (np.exp(COLD_RESISTANCE_ACTIVATION_J_MOL / R_GAS * (1.0 / t - 1.0 / 298.15)) - 1.0)
+    ends = []
+    for temp, cur in zip(temperature_traces_k, currents_a):
+        cur = np.asarray(cur, dtype=float)
+        dis = np.nonzero(cur > 0.01 * max(float(np.max(cur)), 0.0))[0]
+        ends.append(float(np.asarray(temp, dtype=float)[dis[-1] if dis.size else -1]))
+    return float(np.mean(ends))
 
 
 def extension_model_type(params) -> str:
@@ -299,23 +354,24 @@ def _arrhenius_exchange_current(j0, t_ref: float):
     return exchange_current
 
 
-def cold_window_scale(loss_per_k, temperature_k):
-    """How much faster the electrodes' stoichiometries advance in the cold: ``1 / (1 - loss max(T_ref - T, 0))`` (-).
+def cold_window_scale(loss_per_k, temperature_k, anchor_k=COLD_REFERENCE_K):
+    """How much faster the electrodes' stoichiometries advance in the cold: ``1 / (1 - loss (T_anchor - T))`` (-).
 
     With the window loss of :data:`COLD_WINDOW` each electrode's open-circuit potential is evaluated at
     its charged-end stoichiometry plus ``scale`` times the distance from it (:func:`_cold_window_ocp`):
     both windows, and with them the cell's open-circuit voltage over the charge drawn, are compressed
     by ``1 / scale`` - an equilibrium loss of accessible capacity, present at any rate, that comes back
-    as the cell warms. 1 at and above 298.15 K (:data:`COLD_REFERENCE_K`); numbers or PyBaMM symbols.
+    as the cell warms (and a wider window above the anchor). 1 at the anchor temperature ``anchor_k``
+    (K, :data:`ANCHOR_TEMPERATURE`, default 298.15 K); numbers or PyBaMM symbols.
     """
     import pybamm
 
-    if isinstance(temperature_k, pybamm.Symbol) or isinstance(loss_per_k, pybamm.Symbol):
-        below = COLD_REFERENCE_K - temperature_k
+    if any(isinstance(x, pybamm.Symbol) for x in (loss_per_k, temperature_k, anchor_k)):
+        below = anchor_k - temperature_k
         return 1.0 / pybamm.maximum(1.0 - loss_per_k * below, 0.2)
     import numpy as np
 
-    below = COLD_REFERENCE_K - np.asarray(temperature_k, dtype=float)
+    below = float(anchor_k) - np.asarray(temperature_k, dtype=float)
     return 1.0 / np.maximum(1.0 - float(loss_per_k) * below, 0.2)
 
 
@@ -335,7 +391,7 @@ def _cold_window_ocp(ocp, sto_charged: float):
             "Distance across electrode width [m]": pybamm.Scalar(0.0),
             "Distance across electrode height [m]": pybamm.Scalar(0.0),
             "Time [s]": pybamm.t})
-        scale = cold_window_scale(pybamm.Parameter(COLD_WINDOW), t_amb)
+        scale = cold_window_scale(pybamm.Parameter(COLD_WINDOW), t_amb, pybamm.Parameter(ANCHOR_TEMPERATURE))
         moved = sto_charged + (sto - sto_charged) * scale
         return ocp(pybamm.maximum(pybamm.minimum(moved, 1.0 - 1e-6), 1e-6))
 

@@ -22,7 +22,7 @@ CLI = str(Path(sys.executable).parent / "battery-predictor")
 
 @pytest.mark.slow
 @pytest.mark.skipif(not DATA.is_dir(), reason="measured data not available (../shared/data)")
-def test_lgm50_10degC_discharges_name_a_capacity_like_error():
+def test_lgm50_10degC_discharges_name_temperature():
     refs = [str(DATA / f"cc_T25C_{r}.csv") for r in ("0p1C", "0p5C", "1C", "2C")]
     obs = [str(DATA / f"cc_T10C_{r}.csv") for r in ("0p5C", "1C", "2C")]
     cmd = [CLI, "diagnose", "--params", str(PARAMS), "--reference", *refs, "--data", *obs, "--trim",
@@ -38,6 +38,10 @@ def test_lgm50_10degC_discharges_name_a_capacity_like_error():
     # the plain SPM is far off at 10 degC; a sensor offset (the earlier, capacity-like answer) is not claimed
     assert result["baseline"]["heldout_rmse_mV"] > 100.0
     assert result["cause"] != "current_offset", result["evidence"]
+    # the temperature extension anchored at the references' end-of-discharge temperature (36.4 degC) predicts
+    # the held-out parts 56 % better (docs/findings.md); the issue asks >= 30 %
+    assert result["cause"] == "temperature", result["evidence"]
+    assert result["gain_pct"] >= 30.0, result["evidence"]
     # cell_imbalance does not apply to a single cell
     imbalance = next(c for c in result["candidates"] if c["cause"] == "cell_imbalance")
     assert "not_applicable" in imbalance

@@ -96,6 +96,42 @@ def test_cold_window_scale_narrows_below_the_reference_temperature_and_widens_ab
     assert float(ext.cold_window_scale(0.0, 253.15)) == pytest.approx(1.0)
 
 
+def test_window_and_cell_resistance_change_nothing_at_the_anchor_temperature():
+    anchor_k = 309.55
+    assert float(ext.cold_window_scale(0.004, anchor_k, anchor_k)) == pytest.approx(1.0)
+    assert float(ext.cold_window_scale(0.004, 298.15, anchor_k)) == pytest.approx(1.0 / (1.0 - 0.004 * 11.4))
+    assert float(ext.cold_resistance_excess_ohm(0.01, anchor_k, anchor_k)) == pytest.approx(0.0, abs=1e-15)
+    assert float(ext.cold_resistance_excess_ohm(0.01, 298.15, anchor_k)) > 0.0  # below the anchor: more resistance
+    temi = load_params(PARAMS / "temi.yaml")
+    params = replace(temi, extensions=("temperature",),
+                     extra={**dict(temi.extra), ext.COLD_RESISTANCE: 0.01, ext.ANCHOR_TEMPERATURE: anchor_k})
+    assert float(ext.series_resistance_factor(params, anchor_k)) == pytest.approx(1.0)
+    assert float(ext.series_resistance_factor(params, 298.15)) > 1.0
+
+
+def test_reference_anchor_is_the_mean_temperature_where_the_reference_discharges_end():
+    t = np.arange(0.0, 100.0)
+    rest_after = np.where(t < 80, 5.0, 0.0)  # discharges until t = 79, then rests (and cools)
+    warm = np.where(t < 80, 298.15 + 0.4 * t, 300.0)  # self-heats to 329.75 K at the end of the discharge
+    cool = np.full(t.size, 298.15)
+    anchor_k = ext.reference_anchor_k([warm, cool], [rest_after, np.full(t.size, 1.0)])
+    assert anchor_k == pytest.approx(0.5 * (298.15 + 0.4 * 79 + 298.15))
+
+
+def test_diagnosis_anchors_the_temperature_extension_at_measured_references_only():
+    from battery_predictor.diagnosis.diagnose import with_reference_anchor
+
+    params = load_params(PARAMS / "lgm50.yaml")
+    t = np.arange(0.0, 600.0, 10.0)
+    v = np.linspace(4.1, 3.0, t.size)
+    measured = observe(Recording(t, v, np.full(t.size, 5.0), np.linspace(298.15, 318.15, t.size)), params)
+    unmeasured = observe(Recording(t, v, np.full(t.size, 5.0), None), params)
+    anchored = with_reference_anchor(params, [measured])
+    assert ext.extension_value(anchored, ext.ANCHOR_TEMPERATURE) == pytest.approx(318.15)
+    assert with_reference_anchor(params, [measured, unmeasured]) is params
+    assert ext.extension_value(params, ext.ANCHOR_TEMPERATURE) == ext.COLD_REFERENCE_K
+
+
 @pytest.mark.slow
 def test_cold_window_shortens_a_cold_low_rate_discharge_and_changes_nothing_at_the_reference_temperature():
     """Accessible capacity at any rate: a 0.5C discharge at 0 degC ends ~loss x 25 K earlier, at 25 degC it does not move."""
