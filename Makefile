@@ -7,7 +7,7 @@ VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.setup-stamp
 PYTEST_ARGS ?=
 
-.PHONY: setup demo test test-services lint bags benchmarks clean
+.PHONY: setup demo test test-fast test-services lint bags benchmarks clean
 
 setup: $(STAMP)
 
@@ -47,6 +47,12 @@ test-services:
 test: setup test-services
 	$(VENV)/bin/ruff check battery_predictor test benchmarks
 	$(VPY) -m pytest $(PYTEST_ARGS)
+
+# The inner loop: ruff and the ROS-free unit tests (solver-heavy tests belong in test/integration;
+# the diagnosis tests still in test/unit take most of its time). `make test` stays the full suite CI runs.
+test-fast: setup
+	$(VENV)/bin/ruff check battery_predictor test benchmarks
+	$(VPY) -m pytest test/unit $(PYTEST_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check battery_predictor test benchmarks

@@ -1,4 +1,4 @@
-"""Shared fixtures for the ROS-free unit tests."""
+"""Fixtures shared by every test directory (the shipped Temi params, a synthetic Temi discharge)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 from battery_predictor.params import load_params
 from battery_predictor.recording import Recording
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]
 
 #: Parameters the synthetic "truth" pack differs in from the shipped Temi params.
 SYNTHETIC_TRUTH = {
