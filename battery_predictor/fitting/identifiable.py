@@ -14,6 +14,8 @@ negative_stoichiometry     lin    negative stoichiometry ``x`` at the start of t
 series_resistance_ohm      log    pack series resistance outside the cell model (interconnect ``R_eq``)
 negative_diffusivity_m2_s  log    optional transport group (particle diffusivity)
 positive_diffusivity_m2_s  log    optional transport group
+negative_kinetic_scale     log    optional kinetic group: reaction area (so exchange current) factor
+positive_kinetic_scale     log    optional kinetic group
 initial_ocv_v:<k>          lin    open-circuit cell voltage at the start of recording ``k`` (state)
 ========================== ====== ===================================================================
 
@@ -27,6 +29,13 @@ every point of the search box with a plausible OCV is a feasible cell.
 that does so. Geometry (electrode height, width, thickness) and maximum concentrations stay as
 in the params; capacities move the active material volume fractions (and the thickness only
 where a fraction would exceed :data:`MAX_ACTIVE_FRACTION`).
+
+A kinetic scale ``s`` multiplies an electrode's reaction area ``3 eps L / R`` (and with it the
+kinetic overpotential's exchange current) and nothing else: the particle radius becomes ``R / s``
+and the diffusivity ``D / s**2``, so the capacity and the diffusion time ``R**2 / D`` stay. Drive
+cycles sampled at 1 s resolve the instantaneous voltage step of a current step, which the
+series resistance alone (temperature-independent) and the kinetics (Arrhenius, rising towards
+the end of discharge) share; the kinetic scales let the fit put it where the cell has it.
 """
 
 from __future__ import annotations
@@ -59,6 +68,8 @@ RESISTANCE_FACTOR_HIGH = 10.0
 MAX_RESISTANCE_OHM_PER_CELL = 0.2
 #: Diffusivities: searched within these multiples of the params' value (log scale).
 DIFFUSIVITY_FACTORS = (0.01, 100.0)
+#: Kinetic scales (reaction area factors, 1 = the params' own): searched within this range (log scale).
+KINETIC_SCALE_RANGE = (0.02, 50.0)
 #: Initial OCV of a recording: searched this far (V per cell) below and above its first voltage.
 #: The box is wide also for recordings that start at rest: a 50 mV box there is the worse choice
 #: on far-truth Temi draws (docs/identification.md).
@@ -70,10 +81,12 @@ CORE_COORDINATES = ("negative_capacity_ah", "positive_capacity_ah", "negative_st
                     "series_resistance_ohm")
 #: Negative stoichiometry at the start of the first recording: searched within this range.
 NEGATIVE_STOICHIOMETRY_RANGE = (0.2, 0.999)
-OPTIONAL_COORDINATES = ("negative_diffusivity_m2_s", "positive_diffusivity_m2_s")
+OPTIONAL_COORDINATES = ("negative_diffusivity_m2_s", "positive_diffusivity_m2_s", "negative_kinetic_scale",
+                        "positive_kinetic_scale")
 _ELECTRODES = {"negative": "Negative", "positive": "Positive"}
 _DIFFUSIVITY_KEYS = {"negative_diffusivity_m2_s": "Negative particle diffusivity [m2.s-1]",
                      "positive_diffusivity_m2_s": "Positive particle diffusivity [m2.s-1]"}
+_KINETIC_ELECTRODES = {"negative_kinetic_scale": "Negative", "positive_kinetic_scale": "Positive"}
 
 
 @dataclass(frozen=True)
@@ -241,6 +254,10 @@ def default_space(params: PackParams, recordings: Sequence[Recording] = (),
                           *NEGATIVE_STOICHIOMETRY_RANGE, log=False))
     space.append(_widened("series_resistance_ohm", max(shipped["series_resistance_ohm"], r_lo), r_lo, r_hi, log=True))
     for name in extra:
+        if name in _KINETIC_ELECTRODES:
+            _check_kinetic_scalable(params, name)
+            space.append(Coordinate(name, 1.0, *KINETIC_SCALE_RANGE, True))
+            continue
         if name not in shipped:
             raise ParamsError(f"{params.source}: {_DIFFUSIVITY_KEYS[name]} is a function in "
                               f"{params.base_parameter_set}; it cannot be searched as a scalar")
@@ -248,6 +265,37 @@ def default_space(params: PackParams, recordings: Sequence[Recording] = (),
         space.append(Coordinate(name, shipped[name], lo, hi, True))
     space.extend(initial_ocv_coordinates(params, recordings))
     return space
+
+
+def _check_kinetic_scalable(params: PackParams, name: str) -> None:
+    """Raise unless the electrode of kinetic coordinate ``name`` has a scalar radius and diffusivity."""
+    pv = params.parameter_values()
+    cap = _KINETIC_ELECTRODES[name]
+    for key in (f"{cap} particle radius [m]", f"{cap} particle diffusivity [m2.s-1]"):
+        if not isinstance(pv[key], (int, float)):
+            raise ParamsError(f"{params.source}: {key} is a function in {params.base_parameter_set}; "
+                              f"{name} needs it as a scalar")
+
+
+def kinetic_values(params: PackParams, coordinates: Mapping[str, float]) -> dict[str, float]:
+    """Particle radius (m) and diffusivity (m2/s) for the kinetic scales in ``coordinates``.
+
+    A scale ``s`` gives the radius ``R / s`` and the diffusivity ``D / s**2`` (``D`` from a
+    diffusivity coordinate when one is given, else the params'): the reaction area grows by ``s``,
+    the diffusion time ``R**2 / D`` and the capacity stay.
+    """
+    pv = params.parameter_values()
+    out: dict[str, float] = {}
+    for name, cap in _KINETIC_ELECTRODES.items():
+        if name not in coordinates:
+            continue
+        _check_kinetic_scalable(params, name)
+        s = float(coordinates[name])
+        diff_name = f"{cap.lower()}_diffusivity_m2_s"
+        d = float(coordinates[diff_name]) if diff_name in coordinates else float(pv[_DIFFUSIVITY_KEYS[diff_name]])
+        out[f"{cap} particle radius [m]"] = float(pv[f"{cap} particle radius [m]"]) / s
+        out[_DIFFUSIVITY_KEYS[diff_name]] = d / s**2
+    return out
 
 
 def _widened(name: str, initial: float, low: float, high: float, log: bool) -> Coordinate:
@@ -387,6 +435,7 @@ def pybamm_values(params: PackParams, coordinates: Mapping[str, float], n_record
     for name, key in _DIFFUSIVITY_KEYS.items():
         if name in coordinates:
             shared[key] = c[name]
+    shared.update(kinetic_values(params, coordinates))
     x_0, y_0 = _first_state(params, basis, c, shipped, "initial_ocv_v:0" in c)
     q_li_ah = x_0 * c["negative_capacity_ah"] + y_0 * c["positive_capacity_ah"]
     out = []
@@ -441,5 +490,5 @@ def fitted_parameter_names(values: Mapping[str, float]) -> list[str]:
 
 __all__ = [
     "CORE_COORDINATES", "OPTIONAL_COORDINATES", "Coordinate", "ElectrodeBasis", "default_space", "electrode_basis",
-    "initial_stoichiometries", "ocp_curves", "pybamm_values", "shipped_coordinates", "fitted_parameter_names",
+    "initial_stoichiometries", "kinetic_values", "ocp_curves", "pybamm_values", "shipped_coordinates", "fitted_parameter_names",
 ]

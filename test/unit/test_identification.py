@@ -231,6 +231,35 @@ def test_optional_diffusivity_coordinates_reach_the_pybamm_values(panasonic):
     assert values["Positive particle diffusivity [m2.s-1]"] == pytest.approx(3 * coord.initial)
 
 
+def test_a_kinetic_scale_multiplies_the_reaction_area_and_keeps_capacity_and_diffusion_time(panasonic):
+    space = {c.name: c for c in default_space(panasonic, extra=("positive_kinetic_scale",))}
+    coord = space["positive_kinetic_scale"]
+    assert coord.log and coord.initial == 1.0 and coord.contains(1.0)
+    pv = panasonic.parameter_values()
+    radius, diffusivity = "Positive particle radius [m]", "Positive particle diffusivity [m2.s-1]"
+    base = pybamm_values(panasonic, {})[0]
+    scaled = pybamm_values(panasonic, {"positive_kinetic_scale": 4.0})[0]
+    assert scaled[radius] == pytest.approx(pv[radius] / 4.0)
+    assert scaled[radius] ** 2 / scaled[diffusivity] == pytest.approx(pv[radius] ** 2 / pv[diffusivity])
+    for key, value in base.items():  # capacities (fractions, thicknesses) and the initial state unchanged
+        assert scaled[key] == pytest.approx(value)
+    with_diffusivity = pybamm_values(panasonic, {"positive_kinetic_scale": 2.0,
+                                                 "positive_diffusivity_m2_s": 1e-14})[0]
+    assert with_diffusivity[diffusivity] == pytest.approx(1e-14 / 4.0)
+
+
+def test_a_smaller_kinetic_scale_raises_the_instantaneous_voltage_step(panasonic):
+    sim = get_simulator("engine")
+    load = StepLoad(start_s=np.array([0.0, 60.0]), current_a=np.array([0.5, 10.0]), end_s=62.0)
+
+    def step_v(scale: float) -> float:
+        params = panasonic.with_values(pybamm_values(panasonic, {"positive_kinetic_scale": scale})[0])
+        res = sim.simulate(params, SimulationRequest(load=load, initial_soc=0.5, output_time_s=np.array([59.0, 61.0])))
+        return float(res.pack_voltage_v[0] - res.pack_voltage_v[1])
+
+    assert step_v(0.1) > step_v(1.0) + 0.005
+
+
 def test_an_unknown_optional_coordinate_is_a_params_error(panasonic):
     with pytest.raises(ParamsError, match="unknown fit coordinate"):
         default_space(panasonic, extra=("electrolyte_conductivity",))
