@@ -56,6 +56,10 @@ def register(sub) -> None:
     p.add_argument("--simulator", choices=SIMULATORS, default=SIMULATORS[0],
                    help="engine (default: PyBaMM's SPM stepped exactly, milliseconds per day; hands what it does not "
                         "cover to fast and says so), fast (PyBaMM's solver) or liionpack (reference)")
+    p.add_argument("--thermal", choices=("params", "isothermal", "lumped"), default="params",
+                   help="cell thermal model of the fit (and of the fitted params): as the params say (default; "
+                        "cell.options thermal), isothermal at the data's temperature, or lumped (PyBaMM's lumped "
+                        "thermal cell self-heating from the data's first temperature)")
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto")
     p.add_argument("--out", required=True, help="fitted params YAML to write")
     p.add_argument("--plot", default=None, help="PNG of measured vs simulated (default: <out>.png)")
@@ -81,10 +85,11 @@ def run(args) -> int:
     from battery_predictor.fitting.space import fit_space
     from battery_predictor.params import load_params
     from battery_predictor.plots import plot_voltage_fit
+    from battery_predictor.simulation.cell_setup import is_lumped_thermal, with_thermal
 
     check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
     check_plot_file(args.plot or Path(args.out).with_suffix(".png"))
-    params = load_params(args.params)
+    params = with_thermal(load_params(args.params), args.thermal)
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
     out = Path(args.out)
     storage = args.storage or f"sqlite:///{out.with_suffix('.optuna.db').resolve()}"
@@ -109,6 +114,7 @@ def run(args) -> int:
         "failed_trials": result.failed_trials,
         "seed": args.seed,
         "simulator": args.simulator,
+        "thermal": "lumped" if is_lumped_thermal(params) else "isothermal",
         "study": result.study_name,
         "storage": result.storage,
         "started_from": str(args.params),
@@ -121,10 +127,12 @@ def run(args) -> int:
         print_json({"method": "tpe", "r2_mod": best.r2_mod, "trials": result.trials,
                     "failed_trials": result.failed_trials, "resumed_trials": result.resumed_trials,
                     "improved": result.improved, "seconds": result.seconds, "params": result.best_values,
+                    "thermal": "lumped" if is_lumped_thermal(params) else "isothermal",
                     "identifiability": report.to_dict(), "out": str(out), "plot": str(plot_path)})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
-          f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s)")
+          f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s; "
+          f"{'lumped thermal' if is_lumped_thermal(params) else 'isothermal'} cell)")
     if not result.improved:
         print("  no trial beat the start (trial 0, the params' own values): the fitted params equal the start; "
               "more --trials or other --parameters may help")

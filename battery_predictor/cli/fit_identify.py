@@ -42,10 +42,12 @@ def run_identify(args) -> int:
     from battery_predictor.fitting.resample import resample_all
     from battery_predictor.params import load_params
     from battery_predictor.plots import plot_voltage_fit
+    from battery_predictor.simulation.cell_setup import is_lumped_thermal, with_thermal
 
     check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
     check_plot_file(args.plot or Path(args.out).with_suffix(".png"))
-    params = load_params(args.params)
+    params = with_thermal(load_params(args.params), getattr(args, "thermal", "params"))
+    thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
@@ -77,6 +79,7 @@ def run_identify(args) -> int:
         "evaluations": result.evaluations,
         "seed": args.seed,
         "simulator": args.simulator,
+        "thermal": thermal,
         "ocp": ocp_origin(params),
         "identifiability": report.to_dict(),
         "started_from": str(args.params),
@@ -89,11 +92,11 @@ def run_identify(args) -> int:
                     "rmse_mv_per_file": best.rmse_mv, "evaluations": result.evaluations,
                     "tpe_evaluations": result.tpe_evaluations, "seconds": result.seconds,
                     "coordinates": result.coordinates, "params": best.values[0],
-                    "identifiability": report.to_dict(), "ocp": ocp_origin(params),
+                    "identifiability": report.to_dict(), "ocp": ocp_origin(params), "thermal": thermal,
                     "out": str(out), "plot": str(plot_path)})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
-          f"({result.evaluations} evaluations, {result.seconds:.0f} s; {ocp_origin(params)})")
+          f"({result.evaluations} evaluations, {result.seconds:.0f} s; {ocp_origin(params)}; {thermal} cell)")
     for c in space:
         print(f"  {c.name:<34} {c.initial:>12.5g} -> {result.coordinates[c.name]:>12.5g}   "
               f"[{c.low:.4g}, {c.high:.4g}]{' log' if c.log else ''}")

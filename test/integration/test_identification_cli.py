@@ -87,3 +87,21 @@ def test_simulate_on_the_engine_scores_like_the_fast_simulator(one_second_csv):
         assert proc.returncode == 0, proc.stderr
         scores[sim] = json.loads(proc.stdout)["rmse_mV"]
     assert scores["engine"] == pytest.approx(scores["fast"], abs=0.1)
+
+
+@pytest.mark.slow
+def test_fit_thermal_lumped_fits_and_writes_a_lumped_thermal_cell(one_second_csv, tmp_path):
+    """``fit --thermal lumped`` mirrors ``simulate --thermal``: the fit runs and the fitted params keep the cell."""
+    out = tmp_path / "thermal.yaml"
+    proc = _run("fit", "--params", str(PARAMS), "--data", str(one_second_csv), "--resample", "30",
+                "--evaluations", "8", "--thermal", "lumped", "--out", str(out), "--json")
+    assert proc.returncode == 0, proc.stderr
+    obj = json.loads(proc.stdout)
+    assert obj["thermal"] == "lumped"
+    fitted = load_params(out)
+    assert fitted.options.get("thermal") == "lumped"
+    assert fitted.provenance["thermal"] == "lumped"
+    sim = _run("simulate", "--params", str(out), "--data", str(one_second_csv), "--resample", "30", "--json")
+    assert sim.returncode == 0, sim.stderr
+    assert json.loads(sim.stdout)["thermal"] == "lumped"
+    assert json.loads(sim.stdout)["r2_mod"] == pytest.approx(obj["r2_mod"], abs=0.02)
