@@ -214,9 +214,11 @@ def main() -> int:
                 latencies.append(elapsed)
             time.sleep(random.uniform(0.0, args.max_gap))  # spread the calls over the runtime updates' phases
         memory = {name: _memory_mb(p.pid) for name, p in zip(("battery_monitor", "predictor"), procs)}
-        # the next runtime update publishes the callback times of every call
-        _wait(lambda: bench.route_callback.get("answered", 0) >= args.calls + 1, "diagnostics after the calls",
-              procs)
+        # the next runtime update publishes the callback times of every call (nodes before issue 18's
+        # route_latency_p95_s publish none: then n/a)
+        deadline = time.monotonic() + 10.0
+        while bench.route_callback.get("answered", 0) < args.calls + 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
         with bench._lock:
             updates = list(bench.runtime_updates_s)
     finally:
@@ -259,8 +261,9 @@ def main() -> int:
     print(f"  latency  p50 {lat['p50_ms']:.1f} ms   p95 {lat['p95_ms']:.1f} ms   max {lat['max_ms']:.1f} ms   "
           f"(first call {result['first_call_ms']:.1f} ms; target p95 <= 100 ms)")
     cb = result["route_callback"]
-    print(f"  inside the predictor's callback (all {cb['answered']} calls): p50 {cb['p50_ms']:.1f} ms   "
-          f"p95 {cb['p95_ms']:.1f} ms   max {cb['max_ms']:.1f} ms (the rest is middleware, executor, GIL)")
+    if cb:
+        print(f"  inside the predictor's callback (all {cb['answered']} calls): p50 {cb['p50_ms']:.1f} ms   "
+              f"p95 {cb['p95_ms']:.1f} ms   max {cb['max_ms']:.1f} ms (the rest: middleware, executor, GIL)")
     print(f"  answers: {result['answers']}; e.g. {result['example_reason']}")
     print(f"runtime update ({upd['n']} updates): p50 {upd['p50_ms']:.1f} ms   p95 {upd['p95_ms']:.1f} ms   "
           f"max {upd['max_ms']:.1f} ms   (target <= 500 ms)")
