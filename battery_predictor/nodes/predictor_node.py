@@ -72,7 +72,7 @@ from battery_predictor.prediction.core import (
     RuntimeStatus,
 )
 from battery_predictor.prediction.load_estimate import ESTIMATORS
-from battery_predictor.prediction.pack_model import BACKENDS
+from battery_predictor.prediction.pack_model import BACKENDS, FALLBACK_PREFIX
 from battery_predictor.prediction.planning import RoutePlan
 from battery_predictor.prediction.route import RouteDecision, rejected
 from battery_predictor.prediction.station_services import StationServices, StationServicesConfig
@@ -136,6 +136,9 @@ class PredictorNode(Node):
             self.get_logger().info(f"pack model {self.core.params.name} from {self.core.params.source} loaded in "
                                    f"{time.perf_counter() - t0:.1f} s on {self.core.model_backend}; cut-off "
                                    f"{self.core.cutoff_voltage_v:.2f} V, {route}")
+            if self.core.model_backend.startswith(FALLBACK_PREFIX):
+                self.get_logger().warning(f"the SPM engine does not cover these params, answers come from PyBaMM "
+                                          f"stepping (about 100x slower): {self.core.model_backend}")
         for warm in {id(self.core): self.core, id(self.route_core): self.route_core}.values():
             self._compile_route_kernel(warm)
         self.station_services = StationServices(self.services_config)

@@ -45,6 +45,8 @@ from battery_predictor.simulation.network import equivalent_network_resistance_o
 
 #: Stoichiometries a starting SOC must keep away from 0 and 1.
 _SOC_MARGIN = 0.02
+#: Temperatures (K) at which a new pack checks that its diffusivities are constant in the stoichiometry.
+_PROBE_TEMPERATURES_K = (263.15, 313.15)
 
 
 @dataclass(frozen=True)
@@ -139,6 +141,11 @@ class EnginePack:
     series_activation_j_mol : float or None
         Arrhenius activation energy of ``R_eq`` (J/mol); required when the params activate
         ``temperature`` (the particle diffusivities' own temperature dependence comes from PyBaMM).
+    resistance_factor : callable, optional
+        ``resistance_factor(cell_temperature_k) -> factor`` on ``R_eq`` (float or array in, same
+        shape out), e.g. the ``temperature`` extension's Arrhenius factor with its cold cell
+        resistance (``diagnosis.extensions_impl.series_resistance_factor``); default: the Arrhenius
+        factor of ``series_activation_j_mol``.
     samples_per_segment : int
         Minimum samples inside each segment (its end always included).
     max_spacing_s : float
@@ -149,7 +156,7 @@ class EnginePack:
 
     def __init__(self, params, *, current_offset_a: float = 0.0, weak_fraction: float | None = None,
                  series_activation_j_mol: float | None = None, samples_per_segment: int = 4,
-                 max_spacing_s: float = 30.0, backend: str = "auto") -> None:
+                 max_spacing_s: float = 30.0, backend: str = "auto", resistance_factor=None) -> None:
         outside = sorted(set(params.extensions) - set(CELL_MODEL_EXTENSIONS) - {"cell_imbalance", "temperature"})
         if params.model != "SPM" or outside:
             raise SimulationError(f"the engine does not cover model {params.model} with extensions {outside}")
@@ -159,6 +166,7 @@ class EnginePack:
             raise SimulationError("temperature is active: pass the series resistance's activation energy "
                                   "(series_activation_j_mol)")
         self.series_activation_j_mol = float(series_activation_j_mol or 0.0)
+        self._resistance_factor = resistance_factor
         self.weak_fraction = 1.0 if weak_fraction is None or params.series < 2 else float(weak_fraction)
         if not 0.0 < self.weak_fraction <= 10.0:
             raise SimulationError(f"weak group capacity fraction must be > 0, got {weak_fraction}")
@@ -175,6 +183,9 @@ class EnginePack:
         self._diffusivity_factors: dict[float, tuple[float, float]] = {}
         self._tables: dict[float, DiffusivityTemperature] = {}
         self.window = StoichiometryWindow(self.model, pv)
+        if self.model.thermal is None:  # refuse diffusivities that depend on the stoichiometry away from the build
+            for temperature_k in _PROBE_TEMPERATURES_K:
+                self._diffusivity_factors_at(temperature_k)
         p = params.interconnect
         self.r_eq_ohm = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
                                                           p["r_t_ohm"])
@@ -282,7 +293,7 @@ class EnginePack:
         if runs.reached_cutoff[first]:
             return EngineRunEnd(math.nan, True, end_s)
         cell_v = runs.end_voltage_v[:, -1]
-        r_eq = self.r_eq_ohm * series_resistance_factor(float(temperature_k), self.series_activation_j_mol)
+        r_eq = self.r_eq_ohm * self.resistance_factor(float(temperature_k))
         v_pack = pack_voltage_v(cell_v[0], pack_a[-1] - self.current_offset_a, series=self.params.series,
                                 r_eq_ohm=r_eq, weak_cell_voltage_v=cell_v[1] if cell_v.size > 1 else None)
         return EngineRunEnd(float(v_pack), False, end_s)
@@ -319,7 +330,7 @@ class EnginePack:
                                                      cell_temperature_k, batch.eps_n[s], batch.eps_p[s],
                                                      batch.height_m[s]))
         pack_i = np.concatenate(amps)
-        r_eq = self.r_eq_ohm * series_resistance_factor(cell_temperatures[0], self.series_activation_j_mol)
+        r_eq = self.r_eq_ohm * self.resistance_factor(cell_temperatures[0])
         v_pack = pack_voltage_v(v_cells[0], pack_i - self.current_offset_a, series=self.params.series,
                                 r_eq_ohm=r_eq, weak_cell_voltage_v=v_cells[1] if len(v_cells) > 1 else None)
         done = last if reached else duration_s.size
@@ -330,6 +341,12 @@ class EnginePack:
                             weak_particles=state.weak_particles, cell_temperature_k=state.cell_temperature_k)
         return EngineSegmentRun(time_s=time_s, pack_voltage_v=v_pack, pack_current_a=pack_i, segment_end_index=ends,
                                 reached_cutoff=reached, end_time_s=end_s, final_state=state)
+
+    def resistance_factor(self, temperature_k):
+        """Factor on ``R_eq`` at the cell temperature (K; float or array)."""
+        if self._resistance_factor is not None:
+            return np.asarray(self._resistance_factor(temperature_k), dtype=float)
+        return series_resistance_factor(temperature_k, self.series_activation_j_mol)
 
     def _diffusivity_factors_at(self, temperature_k: float) -> tuple[float, float]:
         """Particle diffusivities at ``temperature_k`` over the extraction's (1 for constants)."""
