@@ -315,7 +315,7 @@ class PredictorNode(Node):
         t0 = time.perf_counter()
         low, high = core.runner.soc_bounds
         try:
-            run_end(0.5 * (low + high), [(60.0, 1.0)], core.default_temperature_k)
+            run_end(0.5 * (low + high), [(60.0, 1.0), (60.0, 0.5)], core.default_temperature_k)
         except BatteryPredictorError as exc:
             self.get_logger().warning(f"route kernel warm-up failed (the first route answer compiles it): {exc}")
             return

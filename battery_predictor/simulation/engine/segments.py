@@ -269,7 +269,8 @@ class EnginePack:
             return EngineRunEnd(math.nan if run.reached_cutoff else float(run.pack_voltage_v[-1]),
                                 bool(run.reached_cutoff), float(run.end_time_s))
         segs = np.asarray(segments, dtype=float).reshape(-1, 2)
-        duration_s, pack_a = segs[:, 0], segs[:, 1]
+        # contiguous columns: the compiled kernel has one specialisation for every caller (and the warm-up)
+        duration_s, pack_a = np.ascontiguousarray(segs[:, 0]), np.ascontiguousarray(segs[:, 1])
         if segs.size == 0 or not (np.all(duration_s > 0) and np.all(np.isfinite(segs))):
             raise SimulationError("segments must be finite (duration > 0 s, current) pairs")
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
