@@ -304,24 +304,29 @@ class EnginePack:
         end_s = float(runs.end_time_s[first])
         reached = bool(runs.reached_cutoff[first])
         last = int(runs.cutoff_step[first]) if reached else duration_s.size - 1
-        times, amps, owners, ends = [], [], [], []
-        for k in range(last + 1):
-            t0, h = float(runs.step_start_s[k]), float(duration_s[k])
-            n = max(self.samples_per_segment, int(np.ceil(h / self.max_spacing_s)))
-            t = t0 + np.linspace(0.0, h, n + 1)
-            if reached and k == last:
-                if end_s <= t0:  # below the cut-off as soon as this segment's current flows
-                    break
+        # every completed segment: t0 + np.linspace(0, h, n + 1), for all at once (the same floating-point values)
+        full = last if reached else last + 1
+        h = np.asarray(duration_s[:full], dtype=float)
+        n = np.maximum(self.samples_per_segment, np.ceil(h / self.max_spacing_s).astype(np.int64))
+        sizes = n + 1
+        owner = np.repeat(np.arange(full), sizes)
+        first_index = np.cumsum(sizes) - sizes
+        offset = (np.arange(int(sizes.sum())) - np.repeat(first_index, sizes)).astype(float) * np.repeat(h / n, sizes)
+        end_index = first_index + n
+        offset[end_index] = h
+        time_s = np.repeat(np.asarray(runs.step_start_s[:full], dtype=float), sizes) + offset
+        ends = end_index.tolist()
+        if reached:  # the segment of the cut-off: its samples before the cut-off, then the cut-off
+            t0, h_last = float(runs.step_start_s[last]), float(duration_s[last])
+            if end_s > t0:  # else below the cut-off as soon as this segment's current flows
+                n_last = max(self.samples_per_segment, int(np.ceil(h_last / self.max_spacing_s)))
+                t = t0 + np.linspace(0.0, h_last, n_last + 1)
                 t = np.append(t[t < end_s], end_s)
-            times.append(t)
-            owners.append(np.full(t.size, k))
-            amps.append(np.full(t.size, pack_a[k]))
-            if not (reached and k == last):
-                ends.append(sum(x.size for x in times) - 1)
+                time_s = np.concatenate([time_s, t])
+                owner = np.concatenate([owner, np.full(t.size, last)])
         state = self._state_at(runs, duration_s, cell_a, first, end_s, soc_start, charge0)
-        if not times:  # at the cut-off as soon as the first segment's current flows
+        if time_s.size == 0:  # at the cut-off as soon as the first segment's current flows
             return EngineSegmentRun(np.zeros(1), np.full(1, np.nan), np.zeros(1), [], True, 0.0, state)
-        time_s, owner = np.concatenate(times), np.concatenate(owners)
         batch = runs.extra["batch"]
         v_cells, cell_temperatures = [], []
         for s in range(runs.end_time_s.size):
@@ -330,7 +335,7 @@ class EnginePack:
             v_cells.append(self.model.cell_voltage_v(surfaces[:, 0], surfaces[:, 1], cell_a[owner],
                                                      cell_temperature_k, batch.eps_n[s], batch.eps_p[s],
                                                      batch.height_m[s]))
-        pack_i = np.concatenate(amps)
+        pack_i = np.asarray(pack_a, dtype=float)[owner]
         r_eq = self.r_eq_ohm * self.resistance_factor(cell_temperatures[0])
         v_pack = pack_voltage_v(v_cells[0], pack_i - self.current_offset_a, series=self.params.series,
                                 r_eq_ohm=r_eq, weak_cell_voltage_v=v_cells[1] if len(v_cells) > 1 else None)
