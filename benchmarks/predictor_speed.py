@@ -5,7 +5,11 @@ remaining-runtime update with a full history calibration (temi, fresh core each 
 stepping (``simulator: pybamm``) and on the SPM engine (``simulator: engine``). Both must give the
 same answers; the script prints them.
 
-Run: ``.venv/bin/python benchmarks/predictor_speed.py [--repeat 5]``
+``--route-temperature-k`` sets the measured temperature of the route answers (default 298.15 K, the
+fit temperature: one route run; away from it, e.g. 297.15 K as ``ros_latency.py`` feeds, a route
+answer adds the two activation-energy scenario runs). ``--only engine`` skips PyBaMM stepping.
+
+Run: ``.venv/bin/python benchmarks/predictor_speed.py [--repeat 5] [--route-temperature-k 297.15] [--only engine]``
 """
 
 from __future__ import annotations
@@ -23,10 +27,10 @@ PARAMS = Path(__file__).resolve().parents[1] / "params"
 T_K = 298.15
 
 
-def route_times_s(simulator: str, repeat: int) -> tuple[list[float], float]:
+def route_times_s(simulator: str, repeat: int, temperature_k: float = T_K) -> tuple[list[float], float]:
     core = PredictorCore(PredictorConfig(params_file=str(PARAMS / "ranger_mini.yaml"), simulator=simulator))
     for k in range(130):
-        core.update_state(5.0 * k, 49.6, 1.7 if k % 3 else 6.0, T_K)
+        core.update_state(5.0 * k, 49.6, 1.7 if k % 3 else 6.0, temperature_k)
     now = 5.0 * 129 + 1.0
     core.can_accept_route(longest_route(60.0).sections, now)  # calibration and first use
     times, volts = [], []
@@ -55,11 +59,14 @@ def runtime_times_s(simulator: str, repeat: int) -> tuple[list[float], float]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--route-temperature-k", type=float, default=T_K,
+                    help="measured temperature of the route answers, K (default 298.15, the fit temperature)")
+    ap.add_argument("--only", choices=("pybamm", "engine"), default=None, help="one pack model only")
     args = ap.parse_args()
     print(f"{'model':<8} {'route median':>13} {'route p95':>10} {'V after 80 kg':>14} "
           f"{'runtime update':>15} {'remaining':>10}")
-    for sim in ("pybamm", "engine"):
-        route, volt = route_times_s(sim, args.repeat)
+    for sim in (args.only,) if args.only else ("pybamm", "engine"):
+        route, volt = route_times_s(sim, args.repeat, args.route_temperature_k)
         runtime, remaining = runtime_times_s(sim, args.repeat)
         print(f"{sim:<8} {1e3 * np.median(route):>10.1f} ms {1e3 * np.quantile(route, 0.95):>7.1f} ms "
               f"{volt:>12.3f} V {1e3 * np.median(runtime):>12.0f} ms {remaining / 60:>7.1f} min")

@@ -17,6 +17,7 @@ from battery_predictor.cli.common import (
     check_output_file,
     check_plot_file,
     data_options,
+    engine_fallback,
     load_data,
     print_json,
     progress_wanted,
@@ -128,7 +129,8 @@ def run(args) -> int:
                     "failed_trials": result.failed_trials, "resumed_trials": result.resumed_trials,
                     "improved": result.improved, "seconds": result.seconds, "params": result.best_values,
                     "thermal": "lumped" if is_lumped_thermal(params) else "isothermal",
-                    "identifiability": report.to_dict(), "out": str(out), "plot": str(plot_path)})
+                    "identifiability": report.to_dict(), "out": str(out), "plot": str(plot_path),
+                    "engine_fallback": engine_fallback(best.results)})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
           f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s; "

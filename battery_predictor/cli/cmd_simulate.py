@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import time
 
-from battery_predictor.cli.common import add_data_arguments, check_plot_file, data_options, load_data, print_json
+from battery_predictor.cli.common import (
+    add_data_arguments,
+    check_plot_file,
+    data_options,
+    engine_fallback,
+    load_data,
+    print_json,
+)
 from battery_predictor.simulation import SIMULATORS
 
 
@@ -69,6 +76,10 @@ def run(args) -> int:
     out.pop("data", None)
     out["seconds"] = time.perf_counter() - tic
     out["simulator"] = args.simulator
+    engine_s = [res.extra.get("engine_seconds") for res in results]
+    #: the engine's own stepping time (s), without start-up, loading and extraction; None when it did not run
+    out["engine_seconds"] = sum(engine_s) if all(e is not None for e in engine_s) and engine_s else None
+    out["engine_fallback"] = engine_fallback(results)  # why the engine handed a recording on (None: it did not)
     out["thermal"] = "lumped" if is_lumped_thermal(params) else "isothermal"
     if args.plot:
         from battery_predictor.plots import plot_voltage_fit
@@ -82,7 +93,10 @@ def run(args) -> int:
         print(f"{r['data']}: R2_mod {r['r2_mod']:.4f}, RMSE {r['rmse_mV']:.1f} mV, runtime measured "
               f"{r['runtime_s_measured'] / 60:.1f} min, simulated "
               f"{'n/a' if ts is None else f'{ts / 60:.1f} min'}")
-    print(f"({args.simulator} simulator, {out['thermal']} cell, {out['seconds']:.1f} s)")
+    engine = f", engine stepping {1e3 * out['engine_seconds']:.1f} ms" if out["engine_seconds"] is not None else ""
+    print(f"({args.simulator} simulator, {out['thermal']} cell, {out['seconds']:.1f} s{engine})")
+    if out["engine_fallback"]:
+        print(f"engine fallback: {out['engine_fallback']}")
     if args.plot:
         print(f"wrote {out['plot']}")
     return 0

@@ -45,6 +45,12 @@ def _clean(value: Any) -> Any:
     return value
 
 
+def engine_fallback(results) -> str | None:
+    """Why the engine handed simulations to another simulator (``extra["engine_fallback"]``), None when it did not."""
+    reasons = sorted({res.extra["engine_fallback"] for res in results if res.extra.get("engine_fallback")})
+    return "; ".join(reasons) if reasons else None
+
+
 def print_json(obj: dict[str, Any]) -> None:
     """Print exactly one JSON object on stdout (non-finite numbers become null)."""
     sys.stdout.write(json.dumps(_clean(obj), sort_keys=False) + "\n")

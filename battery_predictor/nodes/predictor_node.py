@@ -21,11 +21,12 @@ Threading: four mutually exclusive callback groups -- pack states, the runtime
 timer (the ~0.1 s model run), ``can_accept_route``, and the station services
 (``feasible_tasks``, ``plan_route``: up to ~2 s for 100 tasks) -- so with a
 :class:`~.executor.StartedMultiThreadedExecutor` a route is answered while a
-runtime update or a station-service answer runs. The core is thread-safe and caches its SOC calibration, so
-by default the service shares the runtime's model and reuses its calibration;
+runtime update or a station-service answer runs. The core is thread-safe and caches its SOC calibration,
+which the pack-state callback computes as each state arrives (``PredictorCore.precalibrate``), so
+by default the service shares the runtime's model and reuses that calibration;
 ``separate_route_model`` gives the service a model of its own instead (one model
 solves one simulation at a time). ``/diagnostics`` carries the model status, the runtime
-update time and the service latency.
+update time and the service latency (the route callback's own time: last, max, p50, p95 of the last 1000).
 
 Time is the node's ROS clock: staleness is ``now - stamp of the last pack state``
 on the same time base as the monitor's stamps (``use_sim_time`` in a replay).
@@ -71,7 +72,7 @@ from battery_predictor.prediction.core import (
     RuntimeStatus,
 )
 from battery_predictor.prediction.load_estimate import ESTIMATORS
-from battery_predictor.prediction.pack_model import BACKENDS
+from battery_predictor.prediction.pack_model import BACKENDS, FALLBACK_PREFIX
 from battery_predictor.prediction.planning import RoutePlan
 from battery_predictor.prediction.route import RouteDecision, rejected
 from battery_predictor.prediction.station_services import StationServices, StationServicesConfig
@@ -135,6 +136,11 @@ class PredictorNode(Node):
             self.get_logger().info(f"pack model {self.core.params.name} from {self.core.params.source} loaded in "
                                    f"{time.perf_counter() - t0:.1f} s on {self.core.model_backend}; cut-off "
                                    f"{self.core.cutoff_voltage_v:.2f} V, {route}")
+            if self.core.model_backend.startswith(FALLBACK_PREFIX):
+                self.get_logger().warning(f"the SPM engine does not cover these params, answers come from PyBaMM "
+                                          f"stepping (about 100x slower): {self.core.model_backend}")
+        for warm in {id(self.core): self.core, id(self.route_core): self.route_core}.values():
+            self._compile_route_kernel(warm)
         self.station_services = StationServices(self.services_config)
         self._lock = threading.Lock()
         self._monitor_stale = False
@@ -297,6 +303,24 @@ class PredictorNode(Node):
         )
 
     # --------------------------------------------------------------- helpers
+    def _compile_route_kernel(self, core: PredictorCore) -> None:
+        """Run a short route end once, so the first ``can_accept_route`` does not compile the engine's kernel.
+
+        The engine answers a route with its fused compiled kernel (``EnginePack.run_end``), which
+        is compiled on first use (seconds); PyBaMM stepping has nothing to compile.
+        """
+        run_end = getattr(core.runner, "run_end", None)
+        if run_end is None:
+            return
+        t0 = time.perf_counter()
+        low, high = core.runner.soc_bounds
+        try:
+            run_end(0.5 * (low + high), [(60.0, 1.0), (60.0, 0.5)], core.default_temperature_k)
+        except BatteryPredictorError as exc:
+            self.get_logger().warning(f"route kernel warm-up failed (the first route answer compiles it): {exc}")
+            return
+        self.get_logger().debug(f"route kernel ready in {time.perf_counter() - t0:.1f} s")
+
     def _now_s(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
 
@@ -334,6 +358,7 @@ class PredictorNode(Node):
             for core in {id(self.core): self.core, id(self.route_core): self.route_core}.values():
                 core.update_state(stamp, float(msg.voltage_v), float(msg.current_a), float(msg.temperature_k),
                                   float(msg.peak_current_a))
+                core.precalibrate()  # here, so a route answer finds the state calibrated
         with self._lock:
             self.states_received += 1
 
@@ -444,8 +469,11 @@ class PredictorNode(Node):
         if updates:
             values += [("runtime_update_last_s", f"{updates[-1]:.4f}"), ("runtime_update_max_s", f"{max(updates):.4f}")]
         if latencies:
+            ordered = sorted(latencies)
             values += [("route_latency_last_s", f"{latencies[-1]:.4f}"),
-                       ("route_latency_max_s", f"{max(latencies):.4f}")]
+                       ("route_latency_max_s", f"{ordered[-1]:.4f}"),
+                       ("route_latency_p50_s", f"{ordered[len(ordered) // 2]:.4f}"),
+                       ("route_latency_p95_s", f"{ordered[min(len(ordered) - 1, int(0.95 * len(ordered)))]:.4f}")]
         if self.core.params is not None:
             values += [("params_file", str(self.core.params.source)), ("pack_model", self.core.model_backend)]
         array = DiagnosticArray()

@@ -342,6 +342,21 @@ class PredictorCore:
                     return propagated
             return self._calibrate_fresh(hist, temperature_k)
 
+    def precalibrate(self) -> None:
+        """Calibrate the latest pack state now, at its temperature, so the next answers find it cached.
+
+        Called when a pack state arrives (the node's state callback), so a route answer does not
+        calibrate. Never raises: an answer that needs the calibration meets the failure again and
+        reports it.
+        """
+        state = self.latest_state()
+        if self.runner is None or state is None:
+            return
+        try:
+            self.calibration(self._temperature(state[3]))
+        except BatteryPredictorError:
+            pass
+
     def _propagate(self, cached: tuple[float, float, Calibration], hist: list, temperature_k: float):
         """The cached state carried to now by the measured current, or None when it left the measurement."""
         newer = [h for h in hist if h[0] >= cached[0]]

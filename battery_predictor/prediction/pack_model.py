@@ -4,8 +4,9 @@ Both answer ``run(start, segments, temperature_k)`` from an SOC or a carried sta
 ``soc_of``, ``soc_bounds``, ``capacity_ah`` and ``concentrations``; they agree within 0.01 mV
 (``test/unit/test_engine_segments.py``). The engine (exact stepping of PyBaMM's discretised SPM,
 :mod:`battery_predictor.simulation.engine`) answers a route in milliseconds instead of about a
-tenth of a second. Params with extensions run on :class:`~.cell_runner.PackRunner` (PyBaMM's
-solver), and the predictor says so (``PredictorCore.model_backend``).
+tenth of a second. It runs the extensions it covers (:func:`engine_pack`); params it does not
+cover run on :class:`~.cell_runner.PackRunner` (PyBaMM's solver), and the predictor says so
+(``PredictorCore.model_backend``, which the node logs as a warning and publishes in ``/diagnostics``).
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ def pack_model(params: PackParams, backend: str = "auto"):
     params : PackParams
         The fitted pack.
     backend : {"auto", "engine", "pybamm"}
-        ``auto``: the engine unless the params activate extensions (or it cannot be built);
-        ``engine``: the engine or an error; ``pybamm``: PyBaMM stepping.
+        ``auto``: the engine where it covers the params (:func:`engine_pack`), else PyBaMM stepping
+        with the reason; ``engine``: the engine or an error; ``pybamm``: PyBaMM stepping.
 
     Raises
     ------
@@ -38,13 +39,46 @@ def pack_model(params: PackParams, backend: str = "auto"):
         raise SimulationError(f"simulator {backend!r} is not one of {', '.join(BACKENDS)}")
     if backend == "pybamm":
         return PackRunner(params), "pybamm (as configured)"
-    if params.extensions and backend == "auto":
-        return PackRunner(params), f"pybamm (the engine here runs no extensions: {', '.join(params.extensions)})"
-    from battery_predictor.simulation.engine.segments import EnginePack
-
     try:
-        return EnginePack(params), "engine (exact stepping of PyBaMM's discretised SPM)"
+        pack = engine_pack(params)
     except SimulationError as exc:
         if backend == "engine":
             raise
-        return PackRunner(params), f"pybamm (the engine cannot run these params: {exc})"
+        return PackRunner(params), f"{FALLBACK_PREFIX}{exc})"
+    extensions = f", extensions {', '.join(params.extensions)}" if params.extensions else ""
+    return pack, f"engine (exact stepping of PyBaMM's discretised SPM{extensions})"
+
+
+#: How :func:`pack_model`'s line starts when the engine could not run the params.
+FALLBACK_PREFIX = "pybamm (the engine cannot run these params: "
+
+
+def engine_pack(params: PackParams):
+    """The engine's pack for ``params``, with the values its extensions need.
+
+    ``current_offset`` (the cells carry reading - offset), ``cell_imbalance`` (the weak group),
+    ``temperature`` (``R_eq``'s Arrhenius factor with the cold cell resistance; the window, kinetics
+    and diffusivities are in PyBaMM's model the engine extracts), ``resistance_growth`` (PyBaMM's
+    contact resistance, in the extracted voltage) and the lumped thermal option run on the engine
+    within 0.02 mV of :class:`~.cell_runner.PackRunner` (``test/unit/test_pack_model_extensions.py``).
+
+    Raises
+    ------
+    SimulationError
+        When the engine does not cover the params (another model, ``electrolyte_transport``,
+        ``hysteresis``, a diffusivity that depends on the stoichiometry such as the ``temperature``
+        extension's extra activation energy at full lithiation).
+    """
+    from battery_predictor.diagnosis.extensions_impl import (
+        EA_SERIES,
+        current_offset_a,
+        extension_value,
+        series_resistance_factor,
+        weak_group_fraction,
+    )
+    from battery_predictor.simulation.engine.segments import EnginePack
+
+    temperature = "temperature" in params.extensions
+    return EnginePack(params, current_offset_a=current_offset_a(params), weak_fraction=weak_group_fraction(params),
+                      series_activation_j_mol=extension_value(params, EA_SERIES) if temperature else None,
+                      resistance_factor=(lambda t: series_resistance_factor(params, t)) if temperature else None)

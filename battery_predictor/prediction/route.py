@@ -127,13 +127,13 @@ def evaluate_route(runner: PackRunner, start: float | RunState, sections: Sequen
         return rejected(f"route draws {charge_ah:.3g} Ah, more than the full pack holds ({runner.capacity_ah:.1f} Ah)",
                         threshold_v, duration_s=duration_s, charge_ah=charge_ah, soc=soc)
     try:
-        run = runner.run(start, [*segments, (settle_s, standstill_current_a)], temperature_k)
+        reached, end_time_s, v_end = _run_end(runner, start, [*segments, (settle_s, standstill_current_a)],
+                                              temperature_k)
     except BatteryPredictorError as exc:
         return rejected(f"model failed: {exc}", threshold_v, duration_s=duration_s, charge_ah=charge_ah, soc=soc)
-    if run.reached_cutoff:
-        return rejected(f"a cell reaches its cut-off {run.end_time_s / 60:.1f} min into the route",
+    if reached:
+        return rejected(f"a cell reaches its cut-off {end_time_s / 60:.1f} min into the route",
                         threshold_v, duration_s=duration_s, charge_ah=charge_ah, soc=soc)
-    v_end = float(run.pack_voltage_v[-1])
     margin = v_end - threshold_v
     accepted = margin >= 0.0
     verdict = "accepted" if accepted else "rejected"
@@ -141,3 +141,17 @@ def evaluate_route(runner: PackRunner, start: float | RunState, sections: Sequen
               f"({duration_s / 60:.1f} min, {charge_ah:.2f} Ah), threshold {threshold_v:.2f} V, "
               f"margin {margin:+.2f} V, start SOC {soc:.3f}")
     return RouteDecision(accepted, v_end, threshold_v, margin, duration_s, charge_ah, soc, reason)
+
+
+def _run_end(runner, start, segments, temperature_k: float) -> tuple[bool, float, float]:
+    """(reached_cutoff, end_time_s, last pack voltage V) of ``runner.run(start, segments, temperature_k)``.
+
+    The engine answers this without the samples inside the segments (``EnginePack.run_end``, the
+    same values); PyBaMM stepping runs the whole route.
+    """
+    run_end = getattr(runner, "run_end", None)
+    if run_end is not None:
+        end = run_end(start, segments, temperature_k)
+        return end.reached_cutoff, end.end_time_s, end.pack_voltage_v
+    run = runner.run(start, segments, temperature_k)
+    return bool(run.reached_cutoff), float(run.end_time_s), float(run.pack_voltage_v[-1])

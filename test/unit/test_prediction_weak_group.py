@@ -102,11 +102,16 @@ def test_calibrations_keep_the_weak_group_and_predict_the_simulated_runtime(weak
     assert from_state.remaining_s == pytest.approx(t_true_s - t_now_s, rel=0.04)
 
 
-def test_the_core_runs_extensions_on_pybamm_and_plain_params_on_the_engine(weak_params):
+def test_the_core_runs_covered_extensions_on_the_engine_and_says_when_it_cannot(weak_params):
+    from battery_predictor.diagnosis.extensions_impl import EA_POS_FULL
     from battery_predictor.prediction.core import PredictorConfig, PredictorCore
 
     weak = PredictorCore(PredictorConfig(params_file=str(weak_params.source)), params=weak_params)
-    assert weak.model_backend.startswith("pybamm (the engine here runs no extensions: cell_imbalance")
+    assert weak.model_backend.startswith("engine") and "cell_imbalance" in weak.model_backend
+    uncovered = weak_params.with_values({EA_POS_FULL: 20000.0}, extensions=("cell_imbalance", "temperature"))
+    pybamm = PredictorCore(PredictorConfig(params_file=str(weak_params.source)), params=uncovered)
+    assert pybamm.model_backend.startswith("pybamm (the engine cannot run these params: ")
+    assert isinstance(pybamm.runner, PackRunner)
     plain = PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml")))
     assert plain.model_backend.startswith("engine")
     forced = PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml"), simulator="pybamm"))

@@ -222,7 +222,7 @@ def _built_simulation(params):
                 raise SimulationError(f"{params.source}: '{key}' is not a constant; the engine needs a constant")
             built[key] = float(value)
         key = f"{electrode} particle diffusivity [m2.s-1]"
-        # a diffusivity that depends on the stoichiometry fails the extraction's linearity check
+        # a diffusivity that depends on the stoichiometry is refused here (and by the linearity check)
         built[key] = diffusivity_m2_s(pv, key, built[T_AMB])
     built[T_INIT] = built[T_AMB]
     built[CURRENT] = 0.0
@@ -241,8 +241,15 @@ def _built_simulation(params):
 def diffusivity_m2_s(pv, key: str, temperature_k: float) -> float:
     """A particle diffusivity of parameter values ``pv`` (m2/s) at ``temperature_k`` (a constant or PyBaMM's function).
 
-    Functions are evaluated at stoichiometry 0.5; the engine's linearity check refuses those that
-    depend on it.
+    Functions are evaluated at the stoichiometries :data:`STOICHIOMETRY_PROBES` and must not depend on
+    them at ``temperature_k``: the extraction's linearity check sees the built temperature only, and a
+    diffusivity constant there may depend on the stoichiometry elsewhere (the ``temperature``
+    extension's extra activation energy at full lithiation vanishes at its reference temperature).
+
+    Raises
+    ------
+    SimulationError
+        When the value cannot be evaluated or depends on the stoichiometry at ``temperature_k``.
     """
     import pybamm
 
@@ -252,10 +259,27 @@ def diffusivity_m2_s(pv, key: str, temperature_k: float) -> float:
     if not callable(value):
         raise SimulationError(f"'{key}' is neither a number nor a function")
     try:
-        out = pv.evaluate(value(pybamm.Scalar(0.5), pybamm.Scalar(float(temperature_k))))
+        out = pv.evaluate(value(pybamm.Vector(np.array(STOICHIOMETRY_PROBES)), pybamm.Scalar(float(temperature_k))))
     except (KeyError, ValueError, TypeError, NotImplementedError) as exc:
         raise SimulationError(f"cannot evaluate '{key}': {str(exc).splitlines()[0]}") from None
-    return float(np.asarray(out).ravel()[0])
+    out = np.broadcast_to(np.asarray(out, dtype=float).ravel(), (len(STOICHIOMETRY_PROBES),))
+    require_constant_in_stoichiometry(key, out, f"at {float(temperature_k):.2f} K")
+    return float(out[1])
+
+
+#: Stoichiometries at which a diffusivity function is evaluated (the middle one is its value).
+STOICHIOMETRY_PROBES = (0.05, 0.5, 0.95)
+#: Largest relative spread of a diffusivity over :data:`STOICHIOMETRY_PROBES` still taken as constant.
+STOICHIOMETRY_CONSTANT_RTOL = 1e-9
+
+
+def require_constant_in_stoichiometry(key: str, values: np.ndarray, where: str) -> None:
+    """Raise when ``values`` (a diffusivity at :data:`STOICHIOMETRY_PROBES`, along the first axis) differ."""
+    spread = np.max(np.abs(values - values[1]), axis=0) / np.maximum(np.abs(values[1]), 1e-300)
+    if np.max(spread) > STOICHIOMETRY_CONSTANT_RTOL:
+        raise SimulationError(f"'{key}' depends on the stoichiometry {where} (by up to {100 * np.max(spread):.3g} %; "
+                              "e.g. the temperature extension's extra activation energy at full lithiation): the "
+                              "engine needs a diffusivity constant in it")
 
 
 def _block_slices(model) -> dict[str, slice]:

@@ -91,10 +91,12 @@ class DiffusivityTemperature:
 def diffusivity_temperature(pv, keys: tuple[str, str], reference_temperature_k: float) -> DiffusivityTemperature:
     """The table of ``pv``'s diffusivities (``keys``: negative, positive) relative to ``reference_temperature_k``.
 
-    Functions are evaluated by PyBaMM at stoichiometry 0.5 (the engine's linearity check refuses
-    diffusivities that depend on it).
+    Functions are evaluated by PyBaMM at stoichiometry 0.5 and must not depend on it at any of the
+    table's temperatures (:data:`~battery_predictor.simulation.engine.model.STOICHIOMETRY_PROBES`).
     """
     import pybamm
+
+    from battery_predictor.simulation.engine.model import STOICHIOMETRY_PROBES, require_constant_in_stoichiometry
 
     lo, hi = TABLE_RANGE_K
     inverse = np.linspace(1.0 / hi, 1.0 / lo, _TABLE_POINTS)
@@ -105,7 +107,10 @@ def diffusivity_temperature(pv, keys: tuple[str, str], reference_temperature_k: 
             rows.append(np.zeros(inverse.size))
             continue
         try:
-            grid = np.asarray(pv.evaluate(value(pybamm.Scalar(0.5), pybamm.Vector(1.0 / inverse))), dtype=float).ravel()
+            probes = [np.broadcast_to(np.asarray(pv.evaluate(value(pybamm.Scalar(x), pybamm.Vector(1.0 / inverse))),
+                                             dtype=float).ravel(), inverse.shape) for x in STOICHIOMETRY_PROBES]
+            require_constant_in_stoichiometry(key, np.vstack(probes), f"between {lo:.0f} and {hi:.0f} K")
+            grid = probes[1]
             ref = float(np.asarray(pv.evaluate(value(pybamm.Scalar(0.5), pybamm.Scalar(reference_temperature_k))))
                         .ravel()[0])
         except (KeyError, ValueError, TypeError, NotImplementedError) as exc:
