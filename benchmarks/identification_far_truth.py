@@ -1,20 +1,25 @@
-"""Identification from far away: a Temi pack whose truth is drawn far from the shipped params.
+"""Identification from far away: a Temi or Ranger pack whose truth is drawn far from the shipped params.
 
 The truth: every identifiable coordinate drawn uniformly (capacities +-40 %, the initial negative
 stoichiometry in 0.6-0.95, the series resistance from 0 to 3x the shipped value), simulated with
 a lumped thermal model (the fit model is isothermal), 5 s samples with 5 mV voltage noise,
 10 mV / 0.1 A quantisation. Day 1 (usage seed 2k+1) is fitted; day 2 (seed 2k+2, another usage)
 is predicted from its own first voltage (each day starts with 60 s at rest, so that voltage is the
-open-circuit voltage) and scored: held-out RMSE, time to 13.30 V against the first noisy sample
-below it and against the noise-free truth (a peak plus noise can cross the threshold hours before
-the noise-free voltage does, on a flat discharge).
+open-circuit voltage) and scored: held-out RMSE, time to the robot's threshold against the first
+noisy sample below it and against the noise-free truth (a peak plus noise can cross the threshold
+hours before the noise-free voltage does, on a flat discharge).
+
+The packs: ``temi`` (4S6P NMC, the Temi usage model's day, threshold 13.30 V) and ``ranger``
+(15S4P LiFePO4: a day of longest routes at payloads drawn from 0-80 kg with the measured (payload,
+slope) currents, each followed by 5-30 min at the standstill current, threshold 46.31 V, the route
+question's).
 
 With ``--fit-thermal lumped`` the fitted model is a lumped thermal cell as the truth (PyBaMM's
 ``{"thermal": "lumped"}`` on the engine, :mod:`battery_predictor.simulation.engine.thermal`), and the
 held-out day is predicted with it; the default ``isothermal`` fits the params' isothermal cell.
 
 Run: ``nice .venv/bin/python benchmarks/identification_far_truth.py --seeds 0 1 2 --evaluations 1000
-[--fit-thermal lumped]``
+[--fit-thermal lumped] [--pack ranger]``
 """
 
 from __future__ import annotations
@@ -34,6 +39,8 @@ from battery_predictor.fitting.identification import IdentificationProblem, iden
 from battery_predictor.fitting.problem import request_for_recording
 from battery_predictor.fitting.resample import resample_windows
 from battery_predictor.params import load_params
+from battery_predictor.profiles import load_ranger_currents, longest_route, route_profile
+from battery_predictor.profiles.load_profile import constant_current_profile
 from battery_predictor.profiles.temi import generate_usage_profile
 from battery_predictor.recording import Recording
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
@@ -41,6 +48,11 @@ from battery_predictor.simulation.cell_setup import with_thermal
 
 REPO = Path(__file__).resolve().parents[1]
 NOISE_V = 0.005
+#: Params file, threshold key and (for the held-out day) initial OCV per cell (V) of each pack.
+PACKS = {"temi": ("temi.yaml", "runtime_cutoff_voltage_v", 4.0),
+         "ranger": ("ranger_mini.yaml", "route_min_voltage_v", 3.33)}
+#: Longest day simulated, s.
+MAX_DAY_S = 12 * 3600.0
 
 
 def draw_truth(params, rng) -> dict[str, float]:
@@ -54,12 +66,26 @@ def draw_truth(params, rng) -> dict[str, float]:
     }
 
 
-def day(truth_params, seed: int, initial_ocv_v: float | None) -> tuple[Recording, np.ndarray]:
+def ranger_day_profile(seed: int):
+    """Longest routes at payloads drawn from 0-80 kg, each followed by 5-30 min of standstill."""
+    rng = np.random.default_rng(seed)
+    currents = load_ranger_currents()
+    profile = None
+    while profile is None or profile.total_duration_s < MAX_DAY_S:
+        leg = route_profile(longest_route(float(rng.uniform(0.0, 80.0))), currents, seed=rng, mode="sampled")
+        leg = leg.concatenate(constant_current_profile(currents.standstill_current_a, float(rng.uniform(300, 1800)),
+                                                      label="standstill"))
+        profile = leg if profile is None else profile.concatenate(leg)
+    return profile
+
+
+def day(truth_params, seed: int, initial_ocv_v: float | None, pack: str = "temi") -> tuple[Recording, np.ndarray]:
     """One usage day of the truth pack (lumped thermal), 5 s samples with sensor noise and quantisation.
 
     Returns the recording and the noise-free pack voltage (V) at its samples.
     """
-    profile = generate_usage_profile(seed=seed, max_duration_s=8 * 3600)
+    profile = (generate_usage_profile(seed=seed, max_duration_s=8 * 3600) if pack == "temi"
+               else ranger_day_profile(seed))
     load = StepLoad.constant(0.0, 60.0).append(StepLoad.from_profile(profile).resample(5.0))
     thermal = replace(truth_params, options={**truth_params.options, "thermal": "lumped"})
     t = np.arange(0.0, load.end_s - 5.0, 5.0)
@@ -69,7 +95,7 @@ def day(truth_params, seed: int, initial_ocv_v: float | None) -> tuple[Recording
     rng = np.random.default_rng(seed)
     v = np.round((res.pack_voltage_v + rng.normal(0.0, NOISE_V, res.time_s.size)) / 0.01) * 0.01
     i = np.round(load.current_at(res.time_s) / 0.1) * 0.1
-    rec = Recording(res.time_s, v, i, temperature_k=np.full(res.time_s.size, 298.15), source=f"temi-day-{seed}")
+    rec = Recording(res.time_s, v, i, temperature_k=np.full(res.time_s.size, 298.15), source=f"{pack}-day-{seed}")
     return rec, res.pack_voltage_v
 
 
@@ -79,14 +105,15 @@ def time_to_v(t, v, threshold_v) -> float | None:
 
 
 def run_seed(params, seed: int, evaluations: int, resample_s: float, simulator: str = "fast",
-             fit_thermal: str = "isothermal") -> dict:
+             fit_thermal: str = "isothermal", pack: str = "temi") -> dict:
     """Draw the truth of ``seed``, fit day 1 with ``params`` (made ``fit_thermal``), predict day 2 and score it."""
     rng = np.random.default_rng(1000 + seed)
     truth = draw_truth(params, rng)
     truth_params = params.with_values(pybamm_values(params, truth)[0])
     params = with_thermal(params, fit_thermal)
-    fit_day, _ = day(truth_params, 2 * seed + 1, None)
-    test_day, test_clean_v = day(truth_params, 2 * seed + 2, 4.0)
+    _, threshold_key, test_ocv_v = PACKS[pack]
+    fit_day, _ = day(truth_params, 2 * seed + 1, None, pack)
+    test_day, test_clean_v = day(truth_params, 2 * seed + 2, test_ocv_v, pack)
     fit_rec = resample_windows(fit_day, resample_s)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
@@ -97,7 +124,7 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float, simulator: 
     seconds = time.perf_counter() - tic
     score = problem.score(result.coordinates)
     fitted = params.with_values(score.values[0])
-    threshold = float(params.thresholds["runtime_cutoff_voltage_v"])
+    threshold = float(params.thresholds[threshold_key])
     req = request_for_recording(fitted, test_day, initial_state="voltage")
     pred = get_simulator("fast").simulate(fitted, req)
     t_meas = time_to_v(test_day.relative_time_s, test_day.voltage_v, threshold)
@@ -107,7 +134,7 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float, simulator: 
     rmse = float(np.sqrt(np.mean((pred.pack_voltage_v[:n] - test_day.voltage_v[:n]) ** 2)))
     report = identifiability_of(problem, result.unit)
     return {
-        "seed": seed, "fit_thermal": fit_thermal, "truth": truth, "fitted": {k: result.coordinates[k] for k in truth},
+        "pack": pack, "seed": seed, "fit_thermal": fit_thermal, "truth": truth, "fitted": {k: result.coordinates[k] for k in truth},
         "fit_r2_mod": score.r2_mod, "fit_rmse_mv": score.rmse_mv[0], "evaluations": result.evaluations,
         "fit_seconds": seconds, "heldout_rmse_mv": 1e3 * rmse,
         "heldout_time_to_threshold_s": {"measured": t_meas, "noise_free_truth": t_clean, "predicted": t_pred},
@@ -127,11 +154,12 @@ def main() -> None:
     ap.add_argument("--simulator", choices=("engine", "fast"), default="engine", help="simulator of the fit (the CLI's default)")
     ap.add_argument("--fit-thermal", choices=("isothermal", "lumped"), default="isothermal",
                     help="thermal model of the fitted cell (the truth is lumped thermal)")
+    ap.add_argument("--pack", choices=tuple(PACKS), default="temi")
     args = ap.parse_args()
-    params = load_params(REPO / "params" / "temi.yaml")
+    params = load_params(REPO / "params" / PACKS[args.pack][0])
     for seed in args.seeds:
-        print(json.dumps(run_seed(params, seed, args.evaluations, args.resample, args.simulator, args.fit_thermal)),
-              flush=True)
+        print(json.dumps(run_seed(params, seed, args.evaluations, args.resample, args.simulator, args.fit_thermal,
+                                  args.pack)), flush=True)
 
 
 if __name__ == "__main__":

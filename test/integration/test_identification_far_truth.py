@@ -1,4 +1,4 @@
-"""Identification from far away: a Temi truth drawn far from the shipped params, a held-out day.
+"""Identification from far away: a Temi or Ranger truth drawn far from the shipped params, a held-out day.
 
 The generator (``benchmarks/identification_far_truth.py``) draws every identifiable coordinate
 in its physical range, simulates a lumped-thermal pack with sensor noise and quantisation, fits
@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from battery_predictor.params import load_params
+
 REPO = Path(__file__).resolve().parents[2]
 SEEDS = [int(s) for s in os.environ.get("BP_FAR_TRUTH_SEEDS", "0").split()]
 
@@ -26,9 +28,11 @@ def _generator():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", SEEDS)
-def test_a_far_truth_is_fitted_to_the_noise_and_its_held_out_runtime_within_one_percent(temi_params, seed):
+@pytest.mark.parametrize("pack", ["temi", "ranger"])
+def test_a_far_truth_is_fitted_to_the_noise_and_its_held_out_runtime_within_one_percent(pack, seed):
     gen = _generator()
-    out = gen.run_seed(temi_params, seed, evaluations=1000, resample_s=30.0, simulator="engine")
+    params = load_params(REPO / "params" / gen.PACKS[pack][0])
+    out = gen.run_seed(params, seed, evaluations=1000, resample_s=30.0, simulator="engine", pack=pack)
     # 5 mV noise + 10 mV quantisation (2.9 mV rms) on the fitted day, twice that as the floor
     assert out["fit_rmse_mv"] < 2 * (gen.NOISE_V * 1e3 + 2.9)
     assert abs(out["heldout_runtime_error_vs_noise_free_pct"]) < 1.0
