@@ -26,7 +26,8 @@ def register(sub) -> None:
                    help="cell thermal model: as the params say (default; cell.options thermal), isothermal at the "
                         "data's temperature, or lumped (PyBaMM's lumped thermal cell self-heating from it)")
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto",
-                   help="initial state: params' concentrations or first measured voltage (default auto)")
+                   help="initial state: params' concentrations or first measured voltage (default auto); a first "
+                        "voltage under load is corrected by the model's own drop at that current")
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
                    help="average the data over windows of this many seconds first (as the battery monitor does)")
     p.add_argument("--plot", default=None, help="write measured vs simulated voltage to this PNG")
@@ -35,9 +36,11 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from dataclasses import replace
+
     from battery_predictor.cli.fit_identify import simulator_named
     from battery_predictor.fitting.cost import r2_mod, rmse_v
-    from battery_predictor.fitting.problem import request_for_recording
+    from battery_predictor.fitting.problem import loaded_start_ocv_v, request_for_recording, starts_at_rest
     from battery_predictor.fitting.resample import resample_all
     from battery_predictor.params import load_params
 
@@ -52,6 +55,9 @@ def run(args) -> int:
     rows, results = [], []
     for rec in recs:
         req = request_for_recording(params, rec, initial_state=args.initial_state, extend_s=0.5 * rec.duration_s)
+        if req.initial_pack_ocv_v is not None and not starts_at_rest(params, rec):
+            # the first voltage of a recording that starts under load is not its OCV
+            req = replace(req, initial_pack_ocv_v=loaded_start_ocv_v(params, rec, sim))
         res = sim.simulate(params, req)
         t = rec.relative_time_s
         u_end = float(rec.voltage_v.min())
@@ -64,6 +70,7 @@ def run(args) -> int:
             "rmse_mV": 1e3 * rmse_v(t, rec.voltage_v, res.time_s, res.pack_voltage_v),
             "runtime_s_measured": float(rec.duration_s),
             "runtime_s_simulated": t_sim,
+            "initial_ocv_v": req.initial_pack_ocv_v,
         })
         results.append(res)
     out = dict(rows[0]) if len(rows) == 1 else {
