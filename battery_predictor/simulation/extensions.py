@@ -1,6 +1,8 @@
-"""What each model extension (see :mod:`battery_predictor.extensions`) changes in the PyBaMM model.
+"""Model extensions: what each one a params file may activate changes in the PyBaMM model.
 
-A params file activates extensions with ``extensions: [name, ...]``; their values live in
+A params file activates extensions with ``extensions: [name, ...]`` (the names are
+:data:`~battery_predictor.params.EXTENSION_NAMES`; ``battery-predictor diagnose`` names the one
+that fixes a model error and writes it with ``--write-params``); their values live in
 ``cell.extra`` (PyBaMM ``"Name [unit]"`` keys, or our own keys with a unit where PyBaMM has
 no parameter). Every simulator and the predictor's :class:`~battery_predictor.prediction.cell_runner.PackRunner`
 build their model through :func:`battery_predictor.simulation.cell_setup.build_model` and their
@@ -57,6 +59,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
+from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 #: Gas constant in J/(mol K).
 R_GAS = 8.314462618
@@ -92,7 +100,7 @@ COLD_WINDOW = "Stoichiometry window loss per kelvin below 298.15 K [K-1]"
 COLD_REFERENCE_K = 298.15
 #: Temperature (K) at which the identified model holds, where the window and the Arrhenius cell resistance of
 #: the extension ``temperature`` change nothing: the diagnosis sets it from the reference recordings
-#: (:func:`reference_anchor_k`); :data:`COLD_REFERENCE_K` when absent.
+#: (:func:`~battery_predictor.diagnosis.reference.reference_anchor_k`); :data:`COLD_REFERENCE_K` when absent.
 ANCHOR_TEMPERATURE = "Temperature extension anchor temperature [K]"
 HEAT_TRANSFER = "Total heat transfer coefficient [W.m-2.K-1]"
 CONTACT_RESISTANCE = "Contact resistance [Ohm]"
@@ -114,7 +122,7 @@ PYBAMM_HYS_DECAY_KEYS = ("Positive particle lithiation hysteresis decay rate",
                          "Positive particle delithiation hysteresis decay rate")
 PYBAMM_HYS_INITIAL_KEY = "Initial hysteresis state in positive electrode"
 
-_OPTIONS = {
+_OPTIONS: dict[str, dict[str, Any]] = {
     "resistance_growth": {"contact resistance": "true"},
     "hysteresis": {"open-circuit potential": ("single", "Axen")},
 }
@@ -171,17 +179,11 @@ def series_resistance_factor(params, temperature_k):
     plus the cell's ohmic part the SPM lacks) follow ``exp(E/R (1/T - 1/T_ref))``, T_ref = 298.15 K, and
     adds the Arrhenius cell resistance's excess over the anchor temperature (:data:`ANCHOR_TEMPERATURE`).
     """
-    import numpy as np
-
-    from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
-
     if "temperature" not in params.extensions:
         return np.ones_like(np.asarray(temperature_k, dtype=float))
     factor = arrhenius_factor(temperature_k, extension_value(params, EA_SERIES))
     r_cold = extension_value(params, COLD_RESISTANCE)
     if r_cold:  # the cells' Arrhenius excess, carried by the pack's series resistance
-        from battery_predictor.simulation.network import equivalent_network_resistance_ohm
-
         ic = params.interconnect
         r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, ic["r_b_ohm"], ic["r_c_ohm"],
                                                  ic["r_t_ohm"])
@@ -210,39 +212,7 @@ def cold_resistance_excess_ohm(r_ref_ohm: float, temperature_k, anchor_k: float 
     numpy.ndarray
         ``R (exp(E/R (1/T - 1/T_anchor)) - 1)`` in Ohm per cell.
     """
-    from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
-
     return r_ref_ohm * (arrhenius_factor(temperature_k, COLD_RESISTANCE_ACTIVATION_J_MOL, float(anchor_k)) - 1.0)
-
-
-def reference_anchor_k(temperature_traces_k, currents_a) -> float:
-    """The anchor temperature of the extension ``temperature`` from the reference recordings (K).
-
-    The identified model's accessible capacity is set where each reference discharge ended, at the
-    temperature the cell had then (a 2C reference self-heats by 30 K before its knee): the anchor is
-    the mean, over the reference recordings, of the measured temperature at each one's last
-    discharging sample (current above 1 % of its largest discharge current).
-
-    Parameters
-    ----------
-    temperature_traces_k : sequence of numpy.ndarray
-        Each reference recording's measured temperature (K).
-    currents_a : sequence of numpy.ndarray
-        Each reference recording's current (A, discharge positive).
-
-    Returns
-    -------
-    float
-        The anchor temperature in K.
-    """
-    import numpy as np
-
-    ends = []
-    for temp, cur in zip(temperature_traces_k, currents_a):
-        cur = np.asarray(cur, dtype=float)
-        dis = np.nonzero(cur > 0.01 * max(float(np.max(cur)), 0.0))[0]
-        ends.append(float(np.asarray(temp, dtype=float)[dis[-1] if dis.size else -1]))
-    return float(np.mean(ends))
 
 
 def extension_model_type(params) -> str:
@@ -288,8 +258,6 @@ def imbalance_cell_inputs(params) -> dict | None:
     at the same position, the strings stay identical and the pack equals the two-group
     model of the fast paths. None when ``cell_imbalance`` is not active.
     """
-    import numpy as np
-
     frac = weak_group_fraction(params)
     if frac == 1.0:
         return None
@@ -313,7 +281,7 @@ def weak_group_params(params):
     return replace(params, extra=extra)
 
 
-def _cooling_area_m2(volume_m3: float) -> float:
+def cooling_area_m2(volume_m3: float) -> float:
     """Surface of a cylinder of ``volume_m3`` with height = :data:`_CYLINDER_ASPECT` x diameter."""
     d = (4.0 * volume_m3 / (math.pi * _CYLINDER_ASPECT)) ** (1.0 / 3.0)
     return math.pi * d * (_CYLINDER_ASPECT * d) + 2.0 * math.pi * (d / 2.0) ** 2
@@ -326,8 +294,6 @@ def lithiation_weight(sto):
     x = (sto - LITHIATION_ONSET) / (1.0 - LITHIATION_ONSET)
     if isinstance(x, pybamm.Symbol):
         return pybamm.maximum(x, 0.0) ** 2
-    import numpy as np
-
     return np.maximum(x, 0.0) ** 2
 
 
@@ -369,8 +335,6 @@ def cold_window_scale(loss_per_k, temperature_k, anchor_k=COLD_REFERENCE_K):
     if any(isinstance(x, pybamm.Symbol) for x in (loss_per_k, temperature_k, anchor_k)):
         below = anchor_k - temperature_k
         return 1.0 / pybamm.maximum(1.0 - loss_per_k * below, 0.2)
-    import numpy as np
-
     below = float(anchor_k) - np.asarray(temperature_k, dtype=float)
     return 1.0 / np.maximum(1.0 - float(loss_per_k) * below, 0.2)
 
@@ -435,7 +399,7 @@ def apply_extension_parameter_values(params, pv):
     if "temperature" in exts:
         missing = {k: v for k, v in THERMAL_DEFAULTS.items() if k not in keys}
         if "Cell cooling surface area [m2]" not in keys:
-            missing["Cell cooling surface area [m2]"] = _cooling_area_m2(float(pv["Cell volume [m3]"]))
+            missing["Cell cooling surface area [m2]"] = cooling_area_m2(float(pv["Cell volume [m3]"]))
         pv.update(missing, check_already_exists=False)
         t_ref = float(pv["Reference temperature [K]"]) if "Reference temperature [K]" in keys else 298.15
         for domain, ea_key in (("Negative", EA_NEG), ("Positive", EA_POS)):
