@@ -553,6 +553,7 @@ class Engine:
         if want_temperature or post.series_activation_j_mol or post.cold_resistance_ohm:
             temp = np.asarray(sols[0]["Volume-averaged cell temperature [K]"](t_eval), dtype=float)
         if post.cold_resistance_ohm:
+            assert temp is not None  # read above whenever there is a cold resistance
             drop = i_cell * cold_resistance_excess_ohm(post.cold_resistance_ohm, temp, post.anchor_k)
             v_cells = [v - drop for v in v_cells]
         r_eq_t = r_eq

@@ -6,10 +6,12 @@ import contextlib
 import logging
 import os
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
 from battery_predictor.errors import SimulationError
+from battery_predictor.params import PackParams
 from battery_predictor.simulation.extensions import (
     THERMAL_DEFAULTS,
     apply_extension_parameter_values,
@@ -81,14 +83,14 @@ def _silence_liionpack_tqdm() -> None:
         vars(solvers)["tqdm"] = functools.partial(tqdm.tqdm, disable=True)
 
 
-def model_options(params) -> dict:
+def model_options(params: PackParams) -> dict[str, Any]:
     """PyBaMM model options for ``params`` (file options plus active extensions)."""
     opts = dict(params.options)
     opts.update(extension_model_options(params))
     return opts
 
 
-def build_model(params, *, for_liionpack: bool = False):
+def build_model(params: PackParams, *, for_liionpack: bool = False) -> Any:
     """A fresh PyBaMM model of the params' type (SPM, SPMe or DFN) with its options."""
     import pybamm
 
@@ -106,7 +108,7 @@ def build_model(params, *, for_liionpack: bool = False):
     return model
 
 
-def prepared_parameter_values(params):
+def prepared_parameter_values(params: PackParams) -> Any:
     """Parameter values ready to simulate a discharge (upper cut-off event relaxed).
 
     A lumped thermal cell (:func:`is_lumped_thermal`) whose base set lacks thermal values (Prada2013)
@@ -129,12 +131,12 @@ def prepared_parameter_values(params):
 THERMAL_MODES = ("params", "isothermal", "lumped")
 
 
-def is_lumped_thermal(params) -> bool:
+def is_lumped_thermal(params: PackParams) -> bool:
     """True when ``params`` ask PyBaMM's lumped thermal model (``cell.options: {thermal: lumped}``)."""
     return model_options(params).get("thermal", "isothermal") == "lumped"
 
 
-def with_thermal(params, mode: str):
+def with_thermal(params: PackParams, mode: str) -> PackParams:
     """``params`` with the cell's thermal model set by a command line's ``--thermal``.
 
     ``"params"`` keeps the params' own (``cell.options``; isothermal unless they say
@@ -153,7 +155,8 @@ def with_thermal(params, mode: str):
     return replace(params, options=options)
 
 
-def initial_concentrations(params, pv, *, initial_soc: float | None, initial_cell_ocv_v: float | None):
+def initial_concentrations(params: PackParams, pv: Any, *, initial_soc: float | None,
+                           initial_cell_ocv_v: float | None) -> tuple[float, float]:
     """Initial electrode concentrations (mol/m3) for an SOC or an open-circuit voltage.
 
     Returns the params' own initial concentrations when both are None.

@@ -62,7 +62,9 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from battery_predictor.params import PackParams
 from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
@@ -162,7 +164,7 @@ THERMAL_DEFAULTS = {
 _CYLINDER_ASPECT = 3.0
 
 
-def extension_model_options(params) -> dict:
+def extension_model_options(params: PackParams) -> dict[str, Any]:
     """PyBaMM model options implied by the params' active extensions."""
     opts: dict = {}
     for ext in params.extensions:
@@ -172,7 +174,7 @@ def extension_model_options(params) -> dict:
     return opts
 
 
-def series_resistance_factor(params, temperature_k):
+def series_resistance_factor(params: PackParams, temperature_k: ArrayLike) -> np.ndarray:
     """Arrhenius factor of the pack's series resistance ``R_eq`` at ``temperature_k`` (1 without the extension).
 
     The extension ``temperature`` makes the series resistance the reference fit found (interconnect
@@ -193,7 +195,7 @@ def series_resistance_factor(params, temperature_k):
     return factor
 
 
-def cold_resistance_excess_ohm(r_ref_ohm: float, temperature_k, anchor_k: float = COLD_REFERENCE_K):
+def cold_resistance_excess_ohm(r_ref_ohm: float, temperature_k: ArrayLike, anchor_k: float = COLD_REFERENCE_K) -> np.ndarray:
     """Excess of the Arrhenius cell resistance over its value at the anchor temperature (Ohm per cell).
 
     Parameters
@@ -215,14 +217,14 @@ def cold_resistance_excess_ohm(r_ref_ohm: float, temperature_k, anchor_k: float 
     return r_ref_ohm * (arrhenius_factor(temperature_k, COLD_RESISTANCE_ACTIVATION_J_MOL, float(anchor_k)) - 1.0)
 
 
-def extension_model_type(params) -> str:
+def extension_model_type(params: PackParams) -> str:
     """Model class name for ``params``: SPMe when ``electrolyte_transport`` is active on an SPM."""
     if "electrolyte_transport" in params.extensions and params.model == "SPM":
         return "SPMe"
     return params.model
 
 
-def extension_value(params, key: str) -> float:
+def extension_value(params: PackParams, key: str) -> float:
     """Value of an extension key: ``cell.extra`` / fitted / manual, else the extension default."""
     vals = params.cell_values
     if key in vals:
@@ -233,7 +235,7 @@ def extension_value(params, key: str) -> float:
     raise KeyError(key)
 
 
-def current_offset_a(params) -> float:
+def current_offset_a(params: PackParams) -> float:
     """Current sensor offset in A (pack level) when ``current_offset`` is active, else 0.
 
     The model is driven by ``measured current - offset``.
@@ -243,14 +245,14 @@ def current_offset_a(params) -> float:
     return extension_value(params, CURRENT_OFFSET)
 
 
-def weak_group_fraction(params) -> float:
+def weak_group_fraction(params: PackParams) -> float:
     """Capacity fraction of the weak series group when ``cell_imbalance`` is active, else 1."""
     if "cell_imbalance" not in params.extensions or params.series < 2:
         return 1.0
     return extension_value(params, WEAK_FRACTION)
 
 
-def imbalance_cell_inputs(params) -> dict | None:
+def imbalance_cell_inputs(params: PackParams) -> dict[str, np.ndarray] | None:
     """Per-cell ``Electrode height [m]`` for liionpack: series position 0 of every string is weak.
 
     liionpack numbers cells string by string (``parallel-strings`` netlist), so cell
@@ -267,7 +269,7 @@ def imbalance_cell_inputs(params) -> dict | None:
     return {"Electrode height [m]": heights}
 
 
-def weak_group_params(params):
+def weak_group_params(params: PackParams) -> PackParams:
     """The params of one cell of the weak group (electrode height scaled), extensions kept otherwise.
 
     The group's cells sit in parallel with identical per-area properties, so they share the current
@@ -287,7 +289,7 @@ def cooling_area_m2(volume_m3: float) -> float:
     return math.pi * d * (_CYLINDER_ASPECT * d) + 2.0 * math.pi * (d / 2.0) ** 2
 
 
-def lithiation_weight(sto):
+def lithiation_weight(sto: Any) -> Any:
     """0 below :data:`LITHIATION_ONSET`, rising quadratically to 1 at full lithiation (numbers or PyBaMM symbols)."""
     import pybamm
 
@@ -320,7 +322,7 @@ def _arrhenius_exchange_current(j0, t_ref: float):
     return exchange_current
 
 
-def cold_window_scale(loss_per_k, temperature_k, anchor_k=COLD_REFERENCE_K):
+def cold_window_scale(loss_per_k: Any, temperature_k: Any, anchor_k: Any = COLD_REFERENCE_K) -> Any:
     """How much faster the electrodes' stoichiometries advance in the cold: ``1 / (1 - loss (T_anchor - T))`` (-).
 
     With the window loss of :data:`COLD_WINDOW` each electrode's open-circuit potential is evaluated at
@@ -382,7 +384,7 @@ def _shifted_ocp(ocp, sign: float):
     return shifted
 
 
-def apply_extension_parameter_values(params, pv):
+def apply_extension_parameter_values(params: PackParams, pv: Any) -> Any:
     """Add what the active extensions need to PyBaMM parameter values ``pv`` (modified and returned).
 
     Called by :func:`~battery_predictor.simulation.cell_setup.prepared_parameter_values`; a no-op

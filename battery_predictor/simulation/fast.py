@@ -190,8 +190,8 @@ class FastPackSimulator:
         v_cell = np.asarray(sol["Terminal voltage [V]"](t_eval), dtype=float)
         i_pack = load.current_at(t_out)
         p = params.interconnect
-        r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
-                                                 p["r_t_ohm"])
+        r_eq: float | np.ndarray = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"],
+                                                                     p["r_c_ohm"], p["r_t_ohm"])
         if "temperature" in params.extensions:  # extension temperature: Arrhenius series and cell resistance
             r_eq = r_eq * series_resistance_factor(
                 params, np.asarray(sol["Volume-averaged cell temperature [K]"](t_eval), dtype=float))

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from battery_predictor.errors import SimulationError
+from battery_predictor.params import PackParams
 from battery_predictor.simulation.base import PackSimResult, SimulationRequest
 from battery_predictor.simulation.cell_setup import (
     build_model,
@@ -41,7 +42,7 @@ def liionpack_input_name(key: str) -> str:
     return key if key > CURRENT_INPUT else RENAMED_INPUT_PREFIX + key
 
 
-def interconnect_resistance_factor(params, temperature_k: float) -> float:
+def interconnect_resistance_factor(params: PackParams, temperature_k: float) -> float:
     """Factor (-) on the netlist's interconnect resistances ``R_b``, ``R_c``, ``R_t`` at ``temperature_k`` (K).
 
     The extension ``temperature`` makes the pack's series resistance follow an Arrhenius law
@@ -75,7 +76,7 @@ class LiionpackSimulator:
         self.period_s = period_s
         self.output_variables = tuple(output_variables)
 
-    def simulate(self, params, request: SimulationRequest) -> PackSimResult:
+    def simulate(self, params: PackParams, request: SimulationRequest) -> PackSimResult:
         """Simulate ``request`` on the pack ``params``; see :class:`PackSimulator`."""
         tic = time.perf_counter()
         load = request.load
@@ -120,7 +121,7 @@ class LiionpackSimulator:
         )
 
 
-def solve_liionpack(params, stepped: StepLoad, period_s: float, *, temperature_k: float,
+def solve_liionpack(params: PackParams, stepped: StepLoad, period_s: float, *, temperature_k: float,
                     initial_cell_voltage_v: float, initial_soc: float | None = None,
                     initial_cell_ocv_v: float | None = None, cell_inputs: Mapping[str, Any] | None = None,
                     resistance_factor: float = 1.0, output_variables: Sequence[str] = (),
@@ -208,7 +209,7 @@ def solve_liionpack(params, stepped: StepLoad, period_s: float, *, temperature_k
         raise SimulationError(f"{failure}: {str(exc).splitlines()[0]}") from None
 
 
-def pack_terminal_nodes(netlist) -> tuple[int, int]:
+def pack_terminal_nodes(netlist: Any) -> tuple[int, int]:
     """(negative, positive) node of the pack's current source in a liionpack netlist."""
     i_map = netlist["desc"].str.find("I") > -1
     node_a, node_b = (int(n) for n in netlist.loc[i_map, ["node2", "node1"]].values.flatten())
