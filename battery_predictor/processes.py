@@ -50,6 +50,7 @@ class ProcessPool:
         self._shared = dict(shared or {})
         self._saved: dict[str, Any] = {}
         self._pool: Any = None  # a multiprocessing Pool while open with workers > 1
+        self._started: list[Any] = []  # the AsyncResults of start()
 
     def __enter__(self) -> ProcessPool:
         self._saved = {k: _SHARED[k] for k in self._shared if k in _SHARED}
@@ -58,11 +59,15 @@ class ProcessPool:
             self._pool = multiprocessing.get_context(self.start_method).Pool(self.workers)
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, exc_type: object, *exc: object) -> None:
         if self._pool is not None:
-            self._pool.terminate()
+            if exc_type is None and all(job.ready() for job in self._started):
+                self._pool.close()  # every task is done: the workers exit on their own (and clean up)
+            else:
+                self._pool.terminate()  # an error, or work still running: stop the workers
             self._pool.join()
             self._pool = None
+            self._started = []
         for key in self._shared:
             _SHARED.pop(key, None)
         _SHARED.update(self._saved)
@@ -86,7 +91,9 @@ class ProcessPool:
         """
         if self._pool is None:
             raise BatteryPredictorError("ProcessPool.start needs a background pool of at least one worker")
-        return self._pool.apply_async(fn, args)
+        job = self._pool.apply_async(fn, args)
+        self._started.append(job)
+        return job
 
 
 def resident_mb(pid: int | None = None) -> float:

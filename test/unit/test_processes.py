@@ -51,3 +51,12 @@ def test_a_background_pool_starts_one_worker_beside_this_process():
 
 def test_resident_memory_of_this_process():
     assert 10.0 < resident_mb() < 100_000.0
+
+
+def test_an_error_in_the_block_stops_the_workers_and_restores_the_shared_values():
+    with pytest.raises(ValueError), ProcessPool(2, shared={"factor": 1}) as pool:
+        pool.map(_scaled, [1, 2])
+        raise ValueError("stop")
+    assert pool._pool is None
+    with pytest.raises(KeyError):
+        shared("factor")
