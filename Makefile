@@ -44,18 +44,22 @@ test-services:
 	    || echo "test: postgresql could not be installed (see $(POSTGRES_LOG)); the fleet test will be skipped"; \
 	else echo "test: no PostgreSQL server binaries (apt-get install postgresql); the fleet test will be skipped"; fi
 
+# mypy checks the ROS-free packages (pyproject.toml [tool.mypy]: everything but nodes/).
 test: setup test-services
 	$(VENV)/bin/ruff check battery_predictor test benchmarks
+	$(VPY) -m mypy
 	$(VPY) -m pytest $(PYTEST_ARGS)
 
-# The inner loop: ruff and the ROS-free unit tests (solver-heavy tests belong in test/integration;
-# the diagnosis tests still in test/unit take most of its time). `make test` stays the full suite CI runs.
+# The inner loop: ruff, mypy and the ROS-free unit tests (solver-heavy tests belong in test/integration).
+# `make test` stays the full suite CI runs.
 test-fast: setup
 	$(VENV)/bin/ruff check battery_predictor test benchmarks
+	$(VPY) -m mypy
 	$(VPY) -m pytest test/unit $(PYTEST_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check battery_predictor test benchmarks
+	$(VPY) -m mypy
 
 bags: setup
 	$(VENV)/bin/battery-predictor lab make-bags --out bags

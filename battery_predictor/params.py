@@ -23,6 +23,7 @@ import yaml
 
 from battery_predictor.errors import ParamsError
 from battery_predictor.ocp import cell_parameter_values, section_to_values, values_to_section
+from battery_predictor.params_checks import check_physical
 
 #: Unit suffixes accepted on our own (non-PyBaMM) keys.
 UNIT_SUFFIXES = (
@@ -30,6 +31,18 @@ UNIT_SUFFIXES = (
 )
 #: Model types a params file may ask for.
 MODEL_TYPES = ("SPM", "SPMe", "DFN")
+#: Model extensions a params file may activate (``extensions: [...]``), in the order the diagnosis reports
+#: them. Each is a cause ``battery-predictor diagnose`` can name; what each one changes in the model is
+#: :mod:`battery_predictor.simulation.extensions`.
+EXTENSION_NAMES = (
+    "temperature",
+    "capacity_fade",
+    "resistance_growth",
+    "current_offset",
+    "cell_imbalance",
+    "electrolyte_transport",
+    "hysteresis",
+)
 #: Interconnect resistances of the liionpack netlist (busbar, connection, internal guess, terminal).
 INTERCONNECT_KEYS = ("r_b_ohm", "r_c_ohm", "r_i_ohm", "r_t_ohm")
 _TOP_LEVEL = ("name", "description", "pack", "cell", "interconnect", "thresholds", "operating", "fit", "extensions",
@@ -159,7 +172,7 @@ class PackParams:
     fit : FitSpec
         Fit parameters and bounds.
     extensions : tuple of str
-        Active model extensions (see :mod:`battery_predictor.extensions`).
+        Active model extensions (see :data:`EXTENSION_NAMES`; the physics: :mod:`battery_predictor.simulation.extensions`).
     provenance : dict
         Free-form record of where fitted values came from.
     source : str
@@ -228,6 +241,10 @@ class PackParams:
     def parameter_values(self):
         """PyBaMM ``ParameterValues``: base set updated with manual, fitted and extension values."""
         return cell_parameter_values(self.base_parameter_set, self.cell_values)
+
+    def fingerprint(self) -> tuple[str, str]:
+        """What :meth:`parameter_values` depends on: the base set and the cell's own values (a hashable key)."""
+        return self.base_parameter_set, repr(sorted(self.cell_values.items()))
 
     def with_values(self, updates: Mapping[str, float], **changes: Any) -> PackParams:
         """Return a copy with fit-parameter values replaced (PyBaMM keys go to ``fitted``)."""
@@ -408,8 +425,6 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
     extensions = data.get("extensions") or []
     if not isinstance(extensions, list):
         raise ParamsError(f"{source}: key 'extensions' must be a list of extension names")
-    from battery_predictor.extensions import EXTENSION_NAMES
-
     for ext in extensions:
         if ext not in EXTENSION_NAMES:
             raise ParamsError(f"{source}: key 'extensions': unknown extension '{ext}' "
@@ -441,10 +456,37 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
         provenance=dict(provenance),
         source=source,
     )
-    from battery_predictor.params_checks import check_physical
-
     check_physical(params)
     return params
+
+
+class _ByFingerprint:
+    """A :class:`PackParams` that hashes and compares by :meth:`PackParams.fingerprint` (a cache key)."""
+
+    __slots__ = ("key", "params")
+
+    def __init__(self, params: PackParams) -> None:
+        self.params = params
+        self.key = params.fingerprint()
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _ByFingerprint) and other.key == self.key
+
+
+@functools.lru_cache(maxsize=512)
+def _parameter_values_of(keyed: _ByFingerprint):
+    return keyed.params.parameter_values()
+
+
+def cached_parameter_values(params: PackParams):
+    """``params.parameter_values()``, cached on the params' fingerprint (building a PyBaMM set costs ~10 ms).
+
+    Shared by every caller: do not modify the result.
+    """
+    return _parameter_values_of(_ByFingerprint(params))
 
 
 def load_params(path: str | Path) -> PackParams:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 from matplotlib.figure import Figure
 
 
@@ -43,7 +44,8 @@ def plot_voltage_fit(recordings: Sequence, results: Sequence, path: str | Path, 
     return path
 
 
-def ocv_figure(soc: Sequence[float], measured_v: Sequence[float], model_v: Sequence[float], *, title: str):
+def ocv_figure(soc: Sequence[float] | np.ndarray, measured_v: Sequence[float] | np.ndarray,
+               model_v: Sequence[float] | np.ndarray, *, title: str):
     """Measured vs model open-circuit voltage against state of charge (a matplotlib ``Figure``).
 
     Parameters

@@ -1,6 +1,6 @@
 """Sweep the diagnosis over the second, independent hidden-effect generator (issue #12).
 
-For every seed, robot and effect of the catalogue (``test/unit/diagnosis_generator2.py``), generate a
+For every seed, robot and effect of the catalogue (``test/integration/diagnosis_generator2.py``), generate a
 reference day and an observed day, run ``battery-predictor diagnose`` as a subprocess, and print one
 Markdown row per case plus the share named right, the claims on ``none`` and the median held-out gain
 of the named effects.
@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "test" / "unit"))
+sys.path.insert(0, str(REPO / "test" / "integration"))
 
 from diagnosis_generator2 import ROBOT_EFFECTS, ROBOTS, make_case  # noqa: E402
 

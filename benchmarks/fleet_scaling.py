@@ -31,8 +31,8 @@ from battery_predictor.fitting.fleet import fit_fleet  # noqa: E402
 from battery_predictor.fitting.local_postgres import LocalPostgres, server_binaries  # noqa: E402
 from battery_predictor.fitting.storage import redacted  # noqa: E402
 from battery_predictor.io.bags import read_recording_bag  # noqa: E402
-from battery_predictor.nodes.memory import resident_mb  # noqa: E402
 from battery_predictor.params import load_params  # noqa: E402
+from battery_predictor.processes import resident_mb  # noqa: E402
 from battery_predictor.recording import Recording  # noqa: E402
 from battery_predictor.simulation.engine import EngineSimulator  # noqa: E402
 

@@ -21,8 +21,6 @@ so the demo never talks to another ROS system. Takes about a minute.
 from __future__ import annotations
 
 import contextlib
-import os
-import random
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -68,51 +66,11 @@ def _bag(name: str) -> Path:
     return path
 
 
-def _isolated_context():
-    """An rclpy context on a random ROS domain (150-229), discovery on this machine only."""
-    import rclpy
-    from rclpy.context import Context
-
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    os.environ.pop("ROS_STATIC_PEERS", None)
-    context = Context()
-    rclpy.init(args=["battery-predictor"], context=context, domain_id=random.randrange(150, 230))
-    return context
-
-
-def _call(session, srv_type, srv_name: str, request, timeout_s: float = 60.0):
-    """Call a service of the session's predictor over the middleware from the session's client node."""
-    import time
-
-    from battery_predictor.errors import BatteryPredictorError
-
-    client = session.client_node.create_client(srv_type, srv_name)
-    try:
-        deadline = time.monotonic() + timeout_s
-        while not client.service_is_ready():
-            if time.monotonic() > deadline:
-                raise BatteryPredictorError(f"demo: service {srv_name} not found")
-            time.sleep(0.01)
-        future = client.call_async(request)
-        while not future.done():
-            if time.monotonic() > deadline:
-                raise BatteryPredictorError(f"demo: no answer from {srv_name}")
-            time.sleep(0.005)
-        return future.result()
-    finally:
-        session.client_node.destroy_client(client)
-
-
 def _feasible_tasks(session, at_min: float) -> list[str]:
     """Ask /feasible_tasks for DEMO_TASKS at the entrance; the lines to print."""
-    from battery_predictor_msgs.msg import Task
-    from battery_predictor_msgs.srv import FeasibleTasks
+    from battery_predictor.nodes.client import feasible_tasks
 
-    kinds = {"information": Task.KIND_INFORMATION, "navigation": Task.KIND_NAVIGATION}
-    request = FeasibleTasks.Request(
-        tasks=[Task(name=n, kind=kinds[k], duration_s=d, destination=dest) for n, k, d, dest in DEMO_TASKS],
-        location="entrance", policy=FeasibleTasks.Request.POLICY_GREEDY)
-    r = _call(session, FeasibleTasks, session.predictor.tasks_service.srv_name, request)
+    r = feasible_tasks(session, DEMO_TASKS, "entrance")
     lines = [f"   /feasible_tasks after {at_min:.0f} min, robot at the entrance, greedy (each task after those "
              "accepted; the walk back to the charger must stay above the cut-off):"]
     if not r.valid:
@@ -128,10 +86,9 @@ def _feasible_tasks(session, at_min: float) -> list[str]:
 
 def _plan_route(session) -> list[str]:
     """Ask /plan_route for DEMO_JOB; the lines to print."""
-    from battery_predictor_msgs.msg import PlannedRoute
-    from battery_predictor_msgs.srv import PlanRoute
+    from battery_predictor.nodes.client import PLANNED_ROUTE_KINDS, plan_route
 
-    r = _call(session, PlanRoute, session.predictor.plan_service.srv_name, PlanRoute.Request(**DEMO_JOB))
+    r = plan_route(session, DEMO_JOB)
     lines = [f"   /plan_route: robot at {DEMO_JOB['start_node']}, {DEMO_JOB['payload_kg']:.0f} kg of luggage from "
              f"{DEMO_JOB['pickup']} to {DEMO_JOB['dropoff']}, then back to the charger:",
              f"   route {' -> '.join(r.nodes)} ({r.length_m:.0f} m, {len(r.sections)} sections, "
@@ -139,11 +96,9 @@ def _plan_route(session) -> list[str]:
              f"   {'accept' if r.accepted else 'reject'}: {r.predicted_voltage_v:.2f} V at the standstill current "
              f"after it, threshold {r.threshold_voltage_v:.2f} V, margin {r.margin_v:+.2f} V, probability above "
              f"the threshold {r.probability_above_threshold:.3f} (accepted at risk {r.risk:.2f})"]
-    kinds = {PlannedRoute.KIND_SHORTEST: "shortest", PlannedRoute.KIND_LEAST_CHARGE_PATH: "least-charge path",
-             PlannedRoute.KIND_CHARGE_FIRST: "charge first"}
     for a in r.alternatives:
         soc = f", charge to SOC >= {a.required_soc:.3f}" if a.required_soc == a.required_soc else ""
-        lines.append(f"   alternative, {kinds.get(a.kind, a.kind)}: {'feasible' if a.feasible else 'not feasible'}{soc}")
+        lines.append(f"   alternative, {PLANNED_ROUTE_KINDS.get(a.kind, a.kind)}: {'feasible' if a.feasible else 'not feasible'}{soc}")
     lines.append(f"   reason: {r.reason}")
     return lines
 
@@ -193,10 +148,8 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
 
 
 def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
-    from battery_predictor_msgs.srv import CanAcceptRoute
-
     from battery_predictor.cli.common import progress_wanted, replay_progress
-    from battery_predictor.nodes.messages import route_section_msgs
+    from battery_predictor.nodes.client import can_accept_route
     from battery_predictor.nodes.replay_session import ReplaySession
     from battery_predictor.profiles.ranger import longest_route
     from battery_predictor.replay import read_replay_stream
@@ -220,8 +173,7 @@ def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
               f"{'P(above)':>9} {'P10 V':>8}")
         reasons = []
         for kg in PAYLOADS_KG:
-            request = CanAcceptRoute.Request(sections=route_section_msgs(longest_route(kg).sections))
-            r = session.call_route(request)
+            r = can_accept_route(session, longest_route(kg).sections)
             print(f"   {kg:>5.0f} kg {'accept' if r.accepted else 'reject':>9} {r.predicted_voltage_v:>7.2f} V "
                   f"{r.threshold_voltage_v:>8.2f} V {r.margin_v:>+6.2f} V {r.route_charge_ah:>5.2f} Ah "
                   f"{r.probability_above_threshold:>9.3f} {r.voltage_at_risk_v:>6.2f} V")
@@ -271,9 +223,11 @@ def _real_data_figures(path: Path) -> None:
 
 
 def run(args) -> int:
+    from battery_predictor.nodes.client import isolated_context
+
     temi_bag, ranger_bag = _bag(args.temi_bag), _bag(args.ranger_bag)
     with output_dir(args.out) as out:
-        context = _isolated_context()
+        context = isolated_context()
         try:
             _temi(context, temi_bag, out, args.rate, args.runtime_period)
             _ranger(context, ranger_bag, args.ranger_at_min, args.rate)

@@ -7,11 +7,10 @@ import shlex
 import sys
 
 from battery_predictor.cli.common import add_input_check_arguments, check_output_dir, check_output_file, print_json
+from battery_predictor.params import EXTENSION_NAMES
 
 
 def register(sub) -> None:
-    from battery_predictor.extensions import EXTENSION_NAMES
-
     p = sub.add_parser(
         "diagnose",
         help="name the cause of the model's error on observed data (temperature, capacity fade, ...)",

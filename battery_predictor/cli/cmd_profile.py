@@ -167,7 +167,7 @@ def _emit(kind: str, profile: LoadProfile, args: argparse.Namespace) -> int:
         outputs["plot"] = str(plot_profile(profile, args.plot))
     if args.psu_dir is not None:
         outputs["psu_files"] = [str(p) for p in write_psu_csv(profile, args.psu_dir, args.psu_voltage_v)]
-    summary = {
+    summary: dict[str, Any] = {
         "kind": kind,
         "points": profile.n_points,
         "total_duration_s": profile.total_duration_s,

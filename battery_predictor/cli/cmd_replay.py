@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import shutil
 from pathlib import Path
+from typing import Any
 
 
 def register(sub) -> None:
@@ -46,11 +47,10 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
 
     ``context``: an initialised rclpy context to use (default: init and shut down the global one).
     """
-    import rclpy
-
     from battery_predictor.cli._ros_params import check_node_params_file
     from battery_predictor.cli.common import check_output_dir, progress_wanted, replay_progress
     from battery_predictor.errors import InputDataError
+    from battery_predictor.nodes.client import ros_context
     from battery_predictor.nodes.replay_run import replay_into_nodes
     from battery_predictor.nodes.replay_session import default_output_dir
     from battery_predictor.replay import error_summary, read_replay_stream, runtime_truth
@@ -68,7 +68,7 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
             raise InputDataError(f"{bag_out}: exists and is not a bag; not removing it")
         shutil.rmtree(bag_out)
     out.mkdir(parents=True, exist_ok=True)
-    overrides = {}
+    overrides: dict[str, Any] = {}
     if pack:
         overrides["params_file"] = str(pack)
     if runtime_period_s is not None:
@@ -77,10 +77,7 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     title = (f"{name}: predicted vs true remaining runtime" if runtime_truth(stream.metadata)
              else f"{name}: predicted remaining runtime")
 
-    own_context = context is None
-    if own_context:
-        rclpy.init(args=["battery-predictor"])
-    try:
+    with ros_context(context) as context:
         if not quiet:
             print(f"replay: {stream.source}: {stream.style} topics {', '.join(stream.topics)}, "
                   f"{len(stream.messages)} messages over {stream.duration_s / 60:.1f} min"
@@ -89,9 +86,6 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
             stream, context=context, params_file=params, out_bag=bag_out, plot=png, plot_title=title, rate=rate,
             bag_metadata={"replay_of": str(bag), "params": str(params), "rate": rate}, overrides=overrides,
             progress=lambda end_ns: replay_progress(stream, end_ns, "replay", enabled=not quiet and progress_wanted()))
-    finally:
-        if own_context:
-            rclpy.try_shutdown()
     stats, points, truth, checkpoints = result.stats, result.points, result.truth, result.checkpoints
     summary = {
         "bag": stream.source,

@@ -11,6 +11,7 @@
 - :mod:`~battery_predictor.diagnosis.scoring`, :mod:`~battery_predictor.diagnosis.lsq`: held-out scores,
   noise level, budgeted least squares.
 - :mod:`~battery_predictor.diagnosis.report`: Markdown report and figures.
-- :mod:`~battery_predictor.diagnosis.extensions_impl`: what an active extension changes in the model used
-  by ``simulate``, ``fit`` and the predictor.
+
+What an active extension changes in the model used by ``simulate``, ``fit`` and the predictor is
+:mod:`battery_predictor.simulation.extensions`.
 """

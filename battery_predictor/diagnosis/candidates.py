@@ -4,7 +4,7 @@ Every candidate names its extra parameters with bounds that keep them physical, 
 it simulates a recording (through :class:`~battery_predictor.diagnosis.engine.Engine`) and
 how its fitted values are written to a params file (``extensions: [name]`` plus
 ``cell.extra``), so that ``simulate``, ``fit`` and the predictor use the extended model
-(:mod:`battery_predictor.diagnosis.extensions_impl`).
+(:mod:`battery_predictor.simulation.extensions`).
 
 The initial state of each observed recording (its SOC) is fitted by every candidate and by
 the baseline alike (:data:`Baseline`, the ``none`` candidate has no other parameter).
@@ -12,12 +12,10 @@ the baseline alike (:data:`Baseline`, the ``none`` candidate has no other parame
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from battery_predictor.diagnosis import extensions_impl as ext
 from battery_predictor.diagnosis.engine import (
     C_N0,
     C_P0,
@@ -30,20 +28,9 @@ from battery_predictor.diagnosis.engine import (
     Post,
     SimOut,
 )
-from battery_predictor.params import PackParams
-
-
-def _parameter_values(params: PackParams):
-    """``params.parameter_values()`` cached by value (building a PyBaMM set costs ~10 ms)."""
-    key = (params.base_parameter_set, repr(sorted(params.cell_values.items())))
-    if key not in _PV_CACHE:
-        if len(_PV_CACHE) > 64:
-            _PV_CACHE.clear()
-        _PV_CACHE[key] = params.parameter_values()
-    return _PV_CACHE[key]
-
-
-_PV_CACHE: dict = {}
+from battery_predictor.fitting.space import unit_to_value, value_to_unit
+from battery_predictor.params import PackParams, cached_parameter_values
+from battery_predictor.simulation import extensions as ext
 
 
 @dataclass(frozen=True)
@@ -71,23 +58,17 @@ class CandParam:
 
     def to_unit(self, u: float) -> float:
         """Map ``u`` in [0, 1] to the parameter's value."""
-        u = min(max(float(u), 0.0), 1.0)
-        if self.log:
-            return math.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
-        return self.low + u * (self.high - self.low)
+        return unit_to_value(u, self.low, self.high, self.log)
 
     def from_value(self, value: float) -> float:
-        """Map a value to [0, 1]."""
-        value = min(max(float(value), self.low), self.high)
-        if self.log:
-            return (math.log(value) - math.log(self.low)) / (math.log(self.high) - math.log(self.low))
-        return (value - self.low) / (self.high - self.low)
+        """Map a value (clamped to the bounds) to [0, 1]."""
+        return value_to_unit(min(max(float(value), self.low), self.high), self.low, self.high, self.log)
 
 
 class Candidate:
     """Base class: the baseline itself (no extra parameter); subclasses add one cause each."""
 
-    #: Cause name (one of :data:`battery_predictor.extensions.EXTENSION_NAMES`, or ``"none"``).
+    #: Cause name (one of :data:`battery_predictor.params.EXTENSION_NAMES`, or ``"none"``).
     name = "none"
     #: What the extension adds, for reports.
     title = "baseline SPM pack model (state of charge only)"
@@ -159,7 +140,7 @@ class Temperature(Candidate):
 
     * **Accessible capacity** (equilibrium, at any rate): both electrodes' stoichiometry windows narrow
       in the cold, a fitted fraction per kelvin below the anchor temperature (``window_loss_per_k``,
-      :func:`~battery_predictor.diagnosis.extensions_impl.cold_window_scale`): the discharged end of each
+      :func:`~battery_predictor.simulation.extensions.cold_window_scale`): the discharged end of each
       window becomes inaccessible, so the discharge reaches its knee earlier even at 0.1C (the LG M50
       cells deliver 5 % less at 10 degC and 10 % less at 0 degC at 0.1C, docs/findings.md), and the cell
       gets the capacity back as it warms (self-heating follows the measured temperature).
@@ -267,7 +248,7 @@ class CapacityFade(Candidate):
         The initial state is then an SOC of the *faded* cell's own window (PyBaMM's definition), so
         the fitted SOC keeps its meaning while the fade parameters change.
         """
-        pv = _parameter_values(params)
+        pv = cached_parameter_values(params)
         eps_n = float(pv[EPS_N]) * (1 - theta["loss_of_active_material_negative"])
         eps_p = float(pv[EPS_P]) * (1 - theta["loss_of_active_material_positive"])
         l_n, l_p = float(pv[L_N]), float(pv[L_P])
@@ -280,7 +261,7 @@ class CapacityFade(Candidate):
         return engine.concentrations_for_soc(self.faded(params, theta), soc)
 
     def run_arguments(self, params, theta):
-        pv = _parameter_values(params)
+        pv = cached_parameter_values(params)
         return {"values": {EPS_N: float(pv[EPS_N]) * (1 - theta["loss_of_active_material_negative"]),
                            EPS_P: float(pv[EPS_P]) * (1 - theta["loss_of_active_material_positive"])}}
 
@@ -404,7 +385,7 @@ class Hysteresis(Candidate):
                                              ext.HYS_INITIAL: -1.0})
 
 
-#: Every candidate cause, in the order of :data:`battery_predictor.extensions.EXTENSION_NAMES`.
+#: Every candidate cause, in the order of :data:`battery_predictor.params.EXTENSION_NAMES`.
 CANDIDATES: tuple[Candidate, ...] = (
     Temperature(), CapacityFade(), ResistanceGrowth(), CurrentOffset(), CellImbalance(), ElectrolyteTransport(),
     Hysteresis(),

@@ -31,15 +31,8 @@
 4. **Judged on held-out data.** Each fitted model simulates the whole recording; only the
    held-out part is scored (RMSE with the padding of R2_mod Eq. 1-2, R2_mod, runtime error),
    so a candidate wins only by predicting better, not by having more knobs.
-5. **Decision.** Candidates are compared by their *excess* held-out error, the part of the RMSE
-   above the voltage noise (:func:`excess_mv`), which no model can predict. Among the candidates
-   whose excess error is within :data:`SEPARABILITY_FACTOR` (plus :data:`NEAR_NOISE_FRACTION` of
-   the noise) of the lowest, the simplest (:data:`SIMPLICITY_ORDER`) is the best one. It is named
-   when it cuts the baseline's held-out RMSE by at least :data:`GAIN_THRESHOLD_PCT` and by more
-   than :data:`NOISE_FACTOR` times the voltage noise, and either the baseline's error is clearly
-   above its floor (:data:`BASELINE_FLOOR_FACTOR`) or the extension brings the held-out error back
-   to that floor with a gain of at least :data:`RESTORE_MIN_GAIN_PCT` (:func:`claim_allowed`);
-   otherwise the cause is ``none``.
+5. **Decision.** :mod:`battery_predictor.diagnosis.decision` (the thresholds and the rule);
+   the result types are :mod:`battery_predictor.diagnosis.results`.
 """
 
 from __future__ import annotations
@@ -48,12 +41,19 @@ import math
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from battery_predictor.diagnosis.candidates import CANDIDATES, Baseline, Candidate
+from battery_predictor.diagnosis.decision import (
+    GAIN_THRESHOLD_PCT,
+    MEASURED_SHIFT_K,
+    choose_best,
+    claim_allowed,
+    near_lowest,
+)
 from battery_predictor.diagnosis.engine import (
     Engine,
     Observed,
@@ -66,9 +66,11 @@ from battery_predictor.diagnosis.reference import (
     DEFAULT_IDENTIFY_BUDGET,
     ReferenceFit,
     identify_reference,
+    reference_anchor_k,
     reference_verdict,
 )
-from battery_predictor.diagnosis.residuals import ResidualAnalysis, analyse_residuals
+from battery_predictor.diagnosis.residuals import ResidualAnalysis, analyse_residuals, evidence_text
+from battery_predictor.diagnosis.results import NOT_JUDGED, CandidateResult, Diagnosis
 from battery_predictor.diagnosis.scoring import (
     fit_residual,
     held_out_score,
@@ -76,217 +78,18 @@ from battery_predictor.diagnosis.scoring import (
     pooled,
 )
 from battery_predictor.errors import BatteryPredictorError, InputDataError
-from battery_predictor.params import PackParams
+from battery_predictor.fitting.space import unit_to_value
+from battery_predictor.params import PackParams, cached_parameter_values
+from battery_predictor.processes import ProcessPool, shared
 from battery_predictor.recording import Recording
+from battery_predictor.simulation.extensions import ANCHOR_TEMPERATURE
 
-#: A candidate must cut the baseline's held-out RMSE by at least this much (%) to be named.
-#: Random extra knobs fitted on 60 % of a recording rarely predict the rest >= 20 % better when
-#: nothing is wrong (the 'none' tests), while every hidden effect of realistic size did (see
-#: docs/findings.md); a smaller threshold named spurious causes on noise-level differences.
-GAIN_THRESHOLD_PCT = 20.0
-#: ... and by more than this many times the voltage noise (absolute improvement) ...
-NOISE_FACTOR = 1.0
-#: ... and the baseline's held-out RMSE must exceed this many times its error floor: the larger of
-#: the voltage noise and the baseline's RMSE on the reference data (what the model achieves when
-#: nothing has changed). Below that, the residual left by the reference fit itself is what a
-#: candidate would explain (the 'none' tests found single extra knobs cutting a 3x-floor baseline
-#: error by half); every hidden effect of realistic size left at least 7x the floor.
-BASELINE_FLOOR_FACTOR = 4.0
-#: ... unless the extension *restores* the floor: its held-out RMSE at most this many times the floor
-#: (what the reference model achieved on the reference data, or the noise) while cutting the
-#: baseline's by at least :data:`RESTORE_MIN_GAIN_PCT`. A knob that only fits the reference model's
-#: own imperfection lowers a 3x-floor error by about half, not to the floor; a small real effect
-#: (a Ranger cell group at 87 % capacity: baseline 1.5x the noise) is predicted down to the noise.
-RESTORE_FACTOR = 1.10
-RESTORE_MIN_GAIN_PCT = 30.0
 #: Default evaluation budget of every observed-data fit (baseline and each candidate; Jacobian columns
-#: count). 40 left a three-parameter capacity fade (LLI 13 %, LAM 1-3 %) in a wrong basin: held-out
-#: 325 mV instead of 8 mV at 80, for 1.6 s more wall time.
+#: count). Why 80, and the other constants here: docs/findings.md, "Code notes (issue 15)".
 DEFAULT_BUDGET = 80
 #: Default evaluation budget of the reference fit (the identification on the SPM engine,
 #: :mod:`battery_predictor.diagnosis.reference`).
 DEFAULT_REFERENCE_BUDGET = DEFAULT_IDENTIFY_BUDGET
-#: The cause reported when the reference fit is too poor to judge any candidate
-#: (:func:`~battery_predictor.diagnosis.reference.reference_verdict`): neither a cause nor ``none``.
-NOT_JUDGED = "not_judged"
-#: Candidates whose excess held-out error (above the noise) is within this factor of the lowest, plus
-#: :data:`NEAR_NOISE_FRACTION` of the noise, are not separable; the simplest of them is named.
-SEPARABILITY_FACTOR = 1.10
-#: Absolute slack of the separability margin, as a fraction of the voltage noise: near the noise
-#: floor the excess errors themselves are uncertain by about that much. (Comparing the RMSEs with a
-#: full noise level of slack named a contact resistance, 15.6 mV, over a hysteresis that predicted
-#: 12.4 mV at 4.1 mV noise: 25 % more excess error is not "the same".)
-NEAR_NOISE_FRACTION = 0.25
-#: From the smallest change of the model to the largest: one post-processed parameter (contact
-#: resistance, current offset), a second cell (imbalance), a model change (SPMe), a thermal model
-#: with two parameters, three degradation parameters, an extra state with three parameters.
-SIMPLICITY_ORDER = ("resistance_growth", "current_offset", "cell_imbalance", "electrolyte_transport",
-                    "temperature", "capacity_fade", "hysteresis")
-
-
-@dataclass
-class CandidateResult:
-    """A fitted candidate (or the baseline, ``cause == "none"``) and its held-out scores."""
-
-    cause: str
-    fitted: dict[str, float]
-    socs: list[float]
-    heldout_rmse_mV: float
-    heldout_r2_mod: float
-    runtime_error_s: float | None
-    fit_rmse_mV: float
-    evaluations: int
-    failures: int
-    seconds: float
-    gain_pct: float = 0.0
-    applicable: bool = True
-    reason: str = ""
-    sims: list[SimOut] = field(default_factory=list, repr=False)
-    fitted_folds: list[dict[str, float]] = field(default_factory=list)
-
-    def metrics(self) -> dict[str, Any]:
-        return {"heldout_rmse_mV": self.heldout_rmse_mV, "heldout_r2_mod": self.heldout_r2_mod,
-                "runtime_error_s": self.runtime_error_s}
-
-    def row(self) -> dict[str, Any]:
-        out = {"cause": self.cause, "heldout_rmse_mV": self.heldout_rmse_mV, "gain_pct": self.gain_pct,
-               "fitted": dict(self.fitted), "heldout_r2_mod": self.heldout_r2_mod,
-               "runtime_error_s": self.runtime_error_s, "fit_rmse_mV": self.fit_rmse_mV,
-               "initial_soc": list(self.socs), "evaluations": self.evaluations, "seconds": self.seconds}
-        if self.fitted_folds:
-            out["fitted_folds"] = [dict(f) for f in self.fitted_folds]
-        if not self.applicable:
-            out["not_applicable"] = self.reason
-        return out
-
-
-@dataclass
-class Diagnosis:
-    """Result of :func:`diagnose`; :meth:`to_json` gives the CLI's JSON object."""
-
-    cause: str
-    evidence: str
-    baseline: CandidateResult
-    extended: CandidateResult
-    gain_pct: float
-    candidates: list[CandidateResult]
-    residuals: ResidualAnalysis
-    noise_mV: float
-    params: PackParams
-    observed: list[Observed]
-    reference: ReferenceFit | None
-    seconds: float
-    budget: int
-    fit_fraction: float
-    separable_with: list[str] = field(default_factory=list)
-    split: str = "time"
-    temperature_shift_k: float | None = None
-    #: False when the reference fit was too poor to judge candidates (``cause == NOT_JUDGED``).
-    judged: bool = True
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "cause": self.cause,
-            "evidence": self.evidence,
-            "baseline": self.baseline.metrics(),
-            "extended": self.extended.metrics(),
-            "gain_pct": self.gain_pct,
-            "candidates": [c.row() for c in self.candidates],
-            "residuals": self.residuals.to_json(),
-            "noise_mV": self.noise_mV,
-            "not_separable_from": list(self.separable_with),
-            "reference_fit": None if self.reference is None else self.reference.to_json(),
-            "judged": self.judged,
-            "budget": self.budget,
-            "fit_fraction": self.fit_fraction,
-            "split": self.split,
-            "temperature_shift_k": self.temperature_shift_k,
-            "seconds": self.seconds,
-        }
-
-    def candidate(self, cause: str) -> CandidateResult:
-        for c in self.candidates:
-            if c.cause == cause:
-                return c
-        if cause == "none":
-            return self.baseline
-        raise KeyError(cause)
-
-    def extended_params(self, engine: Engine | None = None) -> PackParams:
-        """The params with the named extension active and its fitted values (the baseline for ``none``)."""
-        if self.cause == "none":
-            return self.params
-        from battery_predictor.diagnosis.candidates import candidate
-
-        res = self.candidate(self.cause)
-        return candidate(self.cause).extended_params(self.params, res.fitted, res.socs, engine or Engine())
-
-
-def excess_mv(rmse_mv: float, noise_mv: float) -> float:
-    """The part of a held-out RMSE above the voltage noise (mV): ``sqrt(max(rmse^2 - noise^2, 0))``.
-
-    White measurement noise adds in quadrature and no model can predict it, so two models are
-    compared by what they leave on top of it.
-    """
-    return math.sqrt(max(rmse_mv * rmse_mv - noise_mv * noise_mv, 0.0))
-
-
-def near_lowest(valid: Sequence[CandidateResult], noise_mv: float) -> list[CandidateResult]:
-    """The candidates not separable from the lowest held-out error (see :data:`SEPARABILITY_FACTOR`)."""
-    if not valid:
-        return []
-    lowest = min(excess_mv(r.heldout_rmse_mV, noise_mv) for r in valid)
-    margin = SEPARABILITY_FACTOR * lowest + NEAR_NOISE_FRACTION * noise_mv
-    return [r for r in valid if excess_mv(r.heldout_rmse_mV, noise_mv) <= margin]
-
-
-def choose_best(valid: Sequence[CandidateResult], noise_mv: float,
-                measured_first: Sequence[str] = ()) -> CandidateResult | None:
-    """The simplest candidate whose excess held-out error is within the margin of the lowest one.
-
-    Excess errors closer than :data:`SEPARABILITY_FACTOR` (plus :data:`NEAR_NOISE_FRACTION` of the
-    noise) do not tell two causes apart; the one that changes the model least
-    (:data:`SIMPLICITY_ORDER`) is named, e.g. a contact resistance before the SPMe, whose
-    electrolyte resistance also grows the ohmic drop. Causes in ``measured_first`` come first among
-    the inseparable ones: a cause the measurements show directly (a measured temperature unlike the
-    reference's, :data:`MEASURED_SHIFT_K`) is named before a hidden one that predicts as well.
-    """
-    near = near_lowest(valid, noise_mv)
-    if not near:
-        return None
-    return min(near, key=lambda r: (r.cause not in measured_first, SIMPLICITY_ORDER.index(r.cause),
-                                    r.heldout_rmse_mV))
-
-
-#: Observed recordings whose mean measured temperature differs from the references' by more than this
-#: (K) put ``temperature`` first among candidates that predict equally well (:func:`choose_best`). 5 K
-#: changes an Arrhenius rate with a typical battery activation energy (20-50 kJ/mol) by 15-40 %, far
-#: beyond the +-1 K of a chamber or of the self-heating difference between reference runs.
-MEASURED_SHIFT_K = 5.0
-
-
-def claim_allowed(base_rmse_mv: float, best_rmse_mv: float, noise_mv: float, floor_mv: float) -> bool:
-    """Whether a candidate with held-out RMSE ``best_rmse_mv`` may be named over the baseline (mV).
-
-    It must cut the baseline's error by :data:`GAIN_THRESHOLD_PCT`, and either the baseline is
-    clearly above its floor (:data:`BASELINE_FLOOR_FACTOR`) and the cut exceeds
-    :data:`NOISE_FACTOR` noise levels, or the baseline is above its floor and the candidate
-    restores the floor (both by :data:`RESTORE_FACTOR`) with a gain of at least
-    :data:`RESTORE_MIN_GAIN_PCT` (a cut smaller than the noise is then still a cut of the whole
-    error above the floor).
-    """
-    if not (math.isfinite(base_rmse_mv) and math.isfinite(best_rmse_mv)) or base_rmse_mv <= 0:
-        return False
-    gain_pct = 100.0 * (base_rmse_mv - best_rmse_mv) / base_rmse_mv
-    if gain_pct < GAIN_THRESHOLD_PCT:
-        return False
-    if base_rmse_mv > BASELINE_FLOOR_FACTOR * floor_mv and base_rmse_mv - best_rmse_mv > NOISE_FACTOR * noise_mv:
-        return True
-    # a baseline that already predicts within its floor (the reference fit's own error) shows no effect to
-    # restore: a knob that predicts below the floor there fits the observed day better than the reference
-    # model fits its own healthy data (second generator, 'none' on temi: 25.5 mV against a 38.8 mV floor)
-    return (base_rmse_mv > RESTORE_FACTOR * floor_mv and best_rmse_mv <= RESTORE_FACTOR * floor_mv
-            and gain_pct >= RESTORE_MIN_GAIN_PCT)
 
 
 def _log(progress: Callable[[str], None] | None, msg: str) -> None:
@@ -337,7 +140,7 @@ def _fit_on(engine: Engine, cand: Candidate, params: PackParams, observed: Seque
 
     def split(u: np.ndarray) -> tuple[dict[str, float], list[float]]:
         theta = {p.name: p.to_unit(x) for p, x in zip(cparams, u[:n_extra])}
-        socs = [lo + float(x) * (hi - lo) for x, (lo, hi) in zip(u[n_extra:], box)]
+        socs = [unit_to_value(x, lo, hi) for x, (lo, hi) in zip(u[n_extra:], box)]
         return theta, socs
 
     def residual(u: np.ndarray) -> np.ndarray:
@@ -378,7 +181,7 @@ def rest_soc_box(engine: Engine, params: PackParams, obs: Observed, tol_v: float
     if abs(float(obs.i[0])) > REST_C_RATE * cap:
         return (0.0, 1.0)
     v_cell = float(obs.v[0]) / params.series
-    pv = engine.parameter_values(params)
+    pv = cached_parameter_values(params)
     ocv0, ocv100 = float(pv["Open-circuit voltage at 0% SOC [V]"]), float(pv["Open-circuit voltage at 100% SOC [V]"])
     lo = 0.0 if v_cell - tol_v <= ocv0 else soc_from_voltage(engine, params, v_cell - tol_v)
     hi = 1.0 if v_cell + tol_v >= ocv100 else soc_from_voltage(engine, params, v_cell + tol_v)
@@ -451,13 +254,11 @@ def combine_folds(cause: str, observed: Sequence[Observed], folds: Sequence[dict
 
 
 # --------------------------------------------------------------------------- procedure
-_POOL_STATE: dict[str, Any] = {}
-
-
 def _fit_task(task) -> tuple[str, int | None, CandidateResult | dict | str]:
     """Worker: fit one candidate, or one fold of it (the engine, params and data come from the forked parent)."""
     k, cand, held = task
-    st = _POOL_STATE
+    st = shared("diagnosis_fits")
+    res: CandidateResult | dict[str, Any]
     try:
         if held is None:
             res = fit_candidate(st["engine"], cand, st["params"], st["obs"], st["soc_guess"], st["budget"],
@@ -479,13 +280,11 @@ def _run_fits(engine, tasks, params, obs, soc_guess, budget, seed, workers, prog
     only unknowns are the per-recording initial SOCs, gives the same held-out predictions in every fold
     and is fitted once on the time split.
     """
-    import multiprocessing
-
-    _POOL_STATE.update(engine=engine, params=params, obs=obs, soc_guess=soc_guess, budget=budget, seed=seed,
-                       soc_box=soc_box)
+    state = dict(engine=engine, params=params, obs=obs, soc_guess=soc_guess, budget=budget, seed=seed,
+                 soc_box=soc_box)
     # slowest structures first, so that two workers finish together
     order = {"electrolyte_transport": 0, "temperature": 1, "hysteresis": 2, "cell_imbalance": 3, "capacity_fade": 4}
-    jobs = []
+    jobs: list[tuple[int, Candidate, int | None]] = []
     for k, cand in tasks:
         if split == "recordings" and cand.parameters(params, obs):
             jobs += [(k, cand, j) for j in range(len(obs))]
@@ -505,24 +304,15 @@ def _run_fits(engine, tasks, params, obs, soc_guess, budget, seed, workers, prog
             if len(parts[name]) < len(obs) or name in out:
                 return
             out[name] = combine_folds(name, obs, [parts[name][j] for j in range(len(obs))])
-        res = out[name]
-        _log(progress, f"{name}: " + (res if isinstance(res, str) else
-                                      f"held-out RMSE {res.heldout_rmse_mV:.1f} mV ({res.seconds:.0f} s)"))
+        done = out[name]
+        _log(progress, f"{name}: " + (done if isinstance(done, str) else
+                                      f"held-out RMSE {done.heldout_rmse_mV:.1f} mV ({done.seconds:.0f} s)"))
 
-    try:
-        if workers > 1 and len(jobs) > 1:
-            ctx = multiprocessing.get_context("fork")
-            with ctx.Pool(min(workers, len(jobs))) as pool:
-                for name, held, res in pool.imap_unordered(_fit_task, jobs):
-                    if not isinstance(out.get(name), str):
-                        collect(name, held, res)
-        else:
-            for job in jobs:
-                name, held, res = _fit_task(job)
-                if not isinstance(out.get(name), str):
-                    collect(name, held, res)
-    finally:
-        _POOL_STATE.clear()
+    n_proc = min(workers, len(jobs)) if workers > 1 and len(jobs) > 1 else 1
+    with ProcessPool(n_proc, shared={"diagnosis_fits": state}) as pool:
+        for name, held, res in pool.imap_unordered(_fit_task, jobs):
+            if not isinstance(out.get(name), str):
+                collect(name, held, res)
     return out
 
 
@@ -540,9 +330,7 @@ def default_workers() -> int:
 #: ``split="auto"`` uses the cross-recording folds only while they cost at most this many solver
 #: steps (folds x current steps of all observed recordings); each fold simulates nearly all the
 #: data, so N recordings cost about N times the time split. Constant-current lab discharges have
-#: a handful of steps; hours of 1-10 s drive cycles have thousands and fall back to the time split
-#: (LG M50 cold discharges: folds in 42 s; Panasonic 0 degC drive cycles, 4 x ~3100 steps: a single
-#: candidate's folds took over 8 minutes, beyond the 10-minute target of the whole diagnosis).
+#: a handful of steps; hours of 1-10 s drive cycles have thousands and fall back to the time split.
 MAX_FOLD_STEPS = 5000
 
 
@@ -558,7 +346,7 @@ def with_reference_anchor(params: PackParams, refs: Sequence[Observed]) -> PackP
     """``params`` (identified on ``refs``) with the temperature at which they hold, for the ``temperature`` candidate.
 
     The identified model carries the accessible capacity the reference cells had where their discharges
-    ended (:func:`~battery_predictor.diagnosis.extensions_impl.reference_anchor_k`: LG M50 25 degC
+    ended (:func:`~battery_predictor.diagnosis.reference.reference_anchor_k`: LG M50 25 degC
     references 0.1C..2C end at 26-57 degC, anchor 36.4 degC); the extension ``temperature`` changes
     nothing at that temperature. Unchanged (anchor 298.15 K) when a reference has no measured temperature.
 
@@ -574,12 +362,10 @@ def with_reference_anchor(params: PackParams, refs: Sequence[Observed]) -> PackP
     PackParams
         ``params`` with ``Temperature extension anchor temperature [K]`` in ``cell.extra``.
     """
-    from battery_predictor.diagnosis import extensions_impl as ext
-
     if not refs or any(r.temperature_k is None for r in refs):
         return params
-    anchor_k = ext.reference_anchor_k([r.temperature_k for r in refs], [r.i for r in refs])
-    return replace(params, extra={**params.extra, ext.ANCHOR_TEMPERATURE: anchor_k})
+    anchor_k = reference_anchor_k([r.temperature_k for r in refs], [r.i for r in refs])
+    return replace(params, extra={**params.extra, ANCHOR_TEMPERATURE: anchor_k})
 
 
 def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequence[Recording] = (), *,
@@ -660,7 +446,7 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
         raise BatteryPredictorError(f"unknown cause(s): {', '.join(sorted(unknown))}")
 
     tasks = [(0, Baseline())] + [(k + 1, c) for k, c in enumerate(cands)]
-    not_applicable = {}
+    not_applicable: dict[str, str] = {}
     for _k, cand in tasks:
         reason = cand.applicable(params, obs)
         if reason:
@@ -676,7 +462,7 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
         raise BatteryPredictorError(f"the baseline cannot be simulated on the observed data: {base}")
     results = []
     for _, cand in tasks[1:]:
-        res = fitted.get(cand.name, not_applicable.get(cand.name))
+        res = fitted[cand.name] if cand.name in fitted else not_applicable[cand.name]
         if isinstance(res, str):
             res = CandidateResult(cause=cand.name, fitted={}, socs=[], heldout_rmse_mV=float("nan"),
                                   heldout_r2_mod=float("nan"), runtime_error_s=None, fit_rmse_mV=float("nan"),
@@ -703,8 +489,6 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
     close = []
     if cause != "none":
         close = [r.cause for r in near_lowest(valid, noise_mv) if r is not best and r.gain_pct >= GAIN_THRESHOLD_PCT]
-    from battery_predictor.diagnosis.residuals import evidence_text
-
     evidence = evidence_text(cause, base, best, results, analysis, noise_mv, close, floor_mv, shift_k)
     return Diagnosis(cause=cause, evidence=evidence, baseline=base, extended=extended, gain_pct=gain,
                      candidates=results, residuals=analysis, noise_mV=noise_mv, params=params, observed=obs,

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from battery_predictor.errors import InputDataError, SimulationError
-from battery_predictor.params import INTERCONNECT_KEYS, PackParams
+from battery_predictor.params import INTERCONNECT_KEYS, PackParams, cached_parameter_values
 from battery_predictor.recording import Recording
 from battery_predictor.simulation.cell_setup import (
     INPUT_SAFE_KEYS,
@@ -40,6 +40,7 @@ from battery_predictor.simulation.cell_setup import (
     quiet_pybamm,
 )
 from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
+from battery_predictor.simulation.extensions import cold_resistance_excess_ohm
 from battery_predictor.simulation.fast import THICKNESS_TO_FRACTION
 from battery_predictor.simulation.load import StepLoad
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
@@ -305,7 +306,7 @@ class Post:
         Capacity fraction of the weak series group (1 = none).
     cold_resistance_ohm : float
         Arrhenius cell resistance at ``anchor_k`` (Ohm per cell): its excess at the cell temperature
-        (:func:`~battery_predictor.diagnosis.extensions_impl.cold_resistance_excess_ohm`) drops each cell's voltage.
+        (:func:`~battery_predictor.simulation.extensions.cold_resistance_excess_ohm`) drops each cell's voltage.
     anchor_k : float
         Temperature (K) at which ``cold_resistance_ohm`` adds nothing (where the identified model holds).
     series_activation_j_mol : float
@@ -350,9 +351,9 @@ class Engine:
         concentrations, solved on tabulated OCPs (PyBaMM's own solver takes ~0.15 s a call, too slow
         inside a fit; a unit test checks both agree).
         """
-        key = (params.base_parameter_set, repr(sorted(params.cell_values.items())))
+        key = params.fingerprint()
         if key not in self._windows:
-            pv = self.parameter_values(params)
+            pv = cached_parameter_values(params)
             tables = self._ocp_tables(params, pv)
             n_n, n_p, li = self.loadings(pv, {})
             x100 = _solve_ocv(tables, n_n, n_p, li, float(pv["Open-circuit voltage at 100% SOC [V]"]))
@@ -367,15 +368,6 @@ class Engine:
             grid = np.linspace(1e-6, 1.0 - 1e-6, 20001)
             self._windows[key] = (grid, _evaluate_ocp(pv["Negative electrode OCP [V]"], grid, pv),
                                   _evaluate_ocp(pv["Positive electrode OCP [V]"], grid, pv))
-        return self._windows[key]
-
-    def parameter_values(self, params: PackParams):
-        """``params.parameter_values()``, cached (do not modify the result)."""
-        key = ("pv", params.base_parameter_set, repr(sorted(params.cell_values.items())))
-        if key not in self._windows:
-            if len(self._windows) > 512:
-                self._windows.clear()
-            self._windows[key] = params.parameter_values()
         return self._windows[key]
 
     @staticmethod
@@ -398,7 +390,7 @@ class Engine:
         scales (``lithium_scale``) together with the active material (``eps_scale``). With both
         at 1 this is PyBaMM's ``get_initial_stoichiometries``.
         """
-        pv = self.parameter_values(params)
+        pv = cached_parameter_values(params)
         x0, x100, _, _ = self.stoichiometry_window(params)
         n_n, n_p, li = self.loadings(pv, {})
         n_n *= eps_scale[0]
@@ -434,6 +426,7 @@ class Engine:
         pv["Current function [A]"] = interp - pybamm.Parameter(OFFSET) / params.parallel
         pv["Lower voltage cut-off [V]"] = model_cutoff_v(float(pv["Lower voltage cut-off [V]"]), obs, params.series)
         if temperature_trace:  # isothermal cell at the measured temperature, a function of time
+            assert obs.temperature_k is not None  # checked by the caller (simulate)
             t_meas = np.append(obs.t, obs.load.end_s + 1.0)
             temp = np.append(obs.temperature_k, obs.temperature_k[-1])
             trace = pybamm.Interpolant(t_meas, temp, pybamm.t, interpolator="linear")
@@ -488,12 +481,12 @@ class Engine:
         unused = set(values) - value_inputs - set(extra_inputs) - set(THICKNESS_TO_FRACTION) - set(INTERCONNECT_KEYS)
         if unused:
             raise SimulationError(f"cannot vary {', '.join(sorted(unused))} without rebuilding the model")
-        input_keys = set(BASE_INPUTS) | set(extra_inputs) | value_inputs
+        key_set = set(BASE_INPUTS) | set(extra_inputs) | value_inputs
         if temperature_trace:
             if obs.temperature_k is None:
                 raise SimulationError(f"{obs.name}: no measured temperature to follow")
-            input_keys -= {T_AMB, T_INIT}
-        input_keys = tuple(sorted(input_keys))
+            key_set -= {T_AMB, T_INIT}
+        input_keys = tuple(sorted(key_set))
         sim, built_thickness, pv = self._build(params, obs, input_keys, temperature_trace)
         inputs = {}
         for k in input_keys:
@@ -560,8 +553,7 @@ class Engine:
         if want_temperature or post.series_activation_j_mol or post.cold_resistance_ohm:
             temp = np.asarray(sols[0]["Volume-averaged cell temperature [K]"](t_eval), dtype=float)
         if post.cold_resistance_ohm:
-            from battery_predictor.diagnosis.extensions_impl import cold_resistance_excess_ohm
-
+            assert temp is not None  # read above whenever there is a cold resistance
             drop = i_cell * cold_resistance_excess_ohm(post.cold_resistance_ohm, temp, post.anchor_k)
             v_cells = [v - drop for v in v_cells]
         r_eq_t = r_eq

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.processes import ProcessPool, shared
 
 #: Finite-difference step in the unit cube: 1 % of each parameter's range. The solver's relative
 #: tolerance (1e-5) makes smaller steps noisy enough to stall the trust region on a false minimum.
@@ -47,15 +48,23 @@ class LsqResult:
     failures: int
 
 
-_PARALLEL_FUN: dict[str, Callable] = {}
-
-
 def _call_parallel(u: np.ndarray):
     try:
-        r = np.asarray(_PARALLEL_FUN["fun"](u), dtype=float)
+        r = np.asarray(shared("lsq_residual")(u), dtype=float)
         return r if np.all(np.isfinite(r)) else None
     except BatteryPredictorError:
         return None
+
+
+@dataclass
+class _Spent:
+    """What :func:`budgeted_least_squares` has spent and found so far."""
+
+    n: int = 0
+    best_u: np.ndarray | None = None
+    best_cost: float = np.inf
+    fail: int = 0
+    limit: int = 0
 
 
 class ParallelEvaluator:
@@ -69,33 +78,17 @@ class ParallelEvaluator:
     def __init__(self, fun: Callable[[np.ndarray], np.ndarray], workers: int) -> None:
         self.fun = fun
         self.workers = workers
-        self._pool = None
+        self._pool = ProcessPool(workers, shared={"lsq_residual": fun})
 
     def __enter__(self) -> ParallelEvaluator:
-        import multiprocessing
-
-        if self.workers > 1:
-            _PARALLEL_FUN["fun"] = self.fun
-            self._pool = multiprocessing.get_context("fork").Pool(self.workers)
+        self._pool.__enter__()
         return self
 
     def __exit__(self, *exc) -> None:
-        if self._pool is not None:
-            self._pool.terminate()
-            self._pool.join()
-            self._pool = None
-        _PARALLEL_FUN.clear()
+        self._pool.__exit__(*exc)
 
     def map(self, points: list[np.ndarray]) -> list[np.ndarray | None]:
-        if self._pool is None:
-            out = []
-            for u in points:
-                try:
-                    r = np.asarray(self.fun(u), dtype=float)
-                    out.append(r if np.all(np.isfinite(r)) else None)
-                except BatteryPredictorError:
-                    out.append(None)
-            return out
+        """The residual at each point (None where it failed or is not finite)."""
         return self._pool.map(_call_parallel, points)
 
 
@@ -124,23 +117,24 @@ def budgeted_least_squares(fun: Callable[[np.ndarray], np.ndarray], starts: Sequ
     if budget < 1:
         raise BatteryPredictorError(f"budget must be >= 1, got {budget}")
     diff_step = DIFF_STEP if diff_step is None else diff_step
-    state = {"n": 0, "best_u": None, "best_cost": np.inf, "fail": 0, "limit": 0}
+    state = _Spent()
 
-    last: dict[str, object] = {}
+    last: dict[str, np.ndarray] = {}
 
     def record(u, r) -> np.ndarray:
         if r is None:
-            state["fail"] += 1
+            state.fail += 1
             r = failure_residual()
         cost = float(r @ r)
-        if cost < state["best_cost"]:
-            state["best_cost"], state["best_u"] = cost, np.array(u, dtype=float)
+        if cost < state.best_cost:
+            state.best_cost, state.best_u = cost, np.array(u, dtype=float)
         return r
 
     def wrapped(u):
-        if state["n"] >= state["limit"]:
+        if state.n >= state.limit:
             raise _BudgetSpent
-        state["n"] += 1
+        state.n += 1
+        r: np.ndarray | None
         try:
             r = np.asarray(fun(u), dtype=float)
             if not np.all(np.isfinite(r)):
@@ -154,7 +148,7 @@ def budgeted_least_squares(fun: Callable[[np.ndarray], np.ndarray], starts: Sequ
     def jacobian(u):
         u = np.asarray(u, dtype=float)
         f0 = last["r"] if "u" in last and np.array_equal(last["u"], u) else wrapped(u)
-        if state["n"] + u.size > state["limit"]:
+        if state.n + u.size > state.limit:
             raise _BudgetSpent
         steps = np.where(u + diff_step <= 1.0, diff_step, -diff_step)
         points = []
@@ -162,8 +156,9 @@ def budgeted_least_squares(fun: Callable[[np.ndarray], np.ndarray], starts: Sequ
             p = u.copy()
             p[i] += steps[i]
             points.append(p)
+        assert parallel is not None  # the Jacobian is only used with a ParallelEvaluator
         rows = parallel.map(points)
-        state["n"] += u.size
+        state.n += u.size
         jac = np.empty((f0.size, u.size))
         for i, (p, r) in enumerate(zip(points, rows)):
             jac[:, i] = (record(p, r) - f0) / steps[i]
@@ -173,8 +168,8 @@ def budgeted_least_squares(fun: Callable[[np.ndarray], np.ndarray], starts: Sequ
     n_dim = starts[0].size
     per_start = max(1, budget // len(starts))
     for k, u0 in enumerate(starts):
-        state["limit"] = budget if k == len(starts) - 1 else min(budget, state["n"] + per_start)
-        if state["n"] >= state["limit"]:
+        state.limit = budget if k == len(starts) - 1 else min(budget, state.n + per_start)
+        if state.n >= state.limit:
             break
         if n_dim == 0:
             try:
@@ -188,6 +183,6 @@ def budgeted_least_squares(fun: Callable[[np.ndarray], np.ndarray], starts: Sequ
                           x_scale=1.0, max_nfev=10 * budget, xtol=1e-6, ftol=1e-8, gtol=1e-8)
         except _BudgetSpent:
             pass
-    if state["best_u"] is None:
-        return LsqResult(u=starts[0], cost=np.inf, evaluations=state["n"], failures=state["fail"])
-    return LsqResult(u=state["best_u"], cost=state["best_cost"], evaluations=state["n"], failures=state["fail"])
+    if state.best_u is None:
+        return LsqResult(u=starts[0], cost=np.inf, evaluations=state.n, failures=state.fail)
+    return LsqResult(u=state.best_u, cost=state.best_cost, evaluations=state.n, failures=state.fail)

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from battery_predictor.errors import BatteryPredictorError
-from battery_predictor.params import PackParams
+from battery_predictor.params import PackParams, cached_parameter_values
 from battery_predictor.recording import Recording
 
 #: Default evaluation budget of the reference identification on the SPM engine (the ``fit --method
@@ -43,7 +43,7 @@ FALLBACK_BUDGET = 150
 #: held-out error several times the floor). For comparison, identifications that work reach 3-8 mV
 #: per cell on synthetic truths with 5 mV noise and 22-24 mV on the measured Panasonic cell with
 #: another chemistry's OCPs (docs/identification.md). Only the excess over the noise counts (white
-#: noise no model can fit, :func:`~battery_predictor.diagnosis.diagnose.excess_mv`).
+#: noise no model can fit, :func:`~battery_predictor.diagnosis.decision.excess_mv`).
 POOR_EXCESS_MV_PER_CELL = 40.0
 
 
@@ -195,7 +195,7 @@ def reachable_soc_window(params: PackParams, progress: Callable[[str], None] | N
         return params
     except SimulationError:
         pass
-    pv = engine.parameter_values(params)
+    pv = cached_parameter_values(params)
     grid, u_n, u_p = engine._ocp_tables(params, pv)
     n_n, n_p, li = engine.loadings(pv, {})
     lo = max(grid[0], (li - n_p * grid[-1]) / n_n)
@@ -249,3 +249,31 @@ def _log(progress: Callable[[str], None] | None, msg: str) -> None:
 
 __all__ = ["DEFAULT_IDENTIFY_BUDGET", "POOR_EXCESS_MV_PER_CELL", "ReferenceFit", "excess_per_cell_mv",
            "identify_reference", "reference_verdict"]
+
+
+def reference_anchor_k(temperature_traces_k, currents_a) -> float:
+    """The anchor temperature of the extension ``temperature`` from the reference recordings (K).
+
+    The identified model's accessible capacity is set where each reference discharge ended, at the
+    temperature the cell had then (a 2C reference self-heats by 30 K before its knee): the anchor is
+    the mean, over the reference recordings, of the measured temperature at each one's last
+    discharging sample (current above 1 % of its largest discharge current).
+
+    Parameters
+    ----------
+    temperature_traces_k : sequence of numpy.ndarray
+        Each reference recording's measured temperature (K).
+    currents_a : sequence of numpy.ndarray
+        Each reference recording's current (A, discharge positive).
+
+    Returns
+    -------
+    float
+        The anchor temperature in K.
+    """
+    ends = []
+    for temp, cur in zip(temperature_traces_k, currents_a):
+        cur = np.asarray(cur, dtype=float)
+        dis = np.nonzero(cur > 0.01 * max(float(np.max(cur)), 0.0))[0]
+        ends.append(float(np.asarray(temp, dtype=float)[dis[-1] if dis.size else -1]))
+    return float(np.mean(ends))

@@ -16,6 +16,8 @@ import math
 from pathlib import Path
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 from battery_predictor.diagnosis.residuals import _LABELS, FEATURES
 
@@ -29,14 +31,17 @@ def _fmt(v, digits: int = 1) -> str:
     return f"{v:.{digits}f}"
 
 
+def _figure(figsize: tuple[float, float]) -> Figure:
+    """A matplotlib ``Figure`` on the Agg canvas (no pyplot, no global backend)."""
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig
+
+
 def plot_voltage(diag, path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     n = len(diag.observed)
-    fig, axes = plt.subplots(2 * n, 1, figsize=(11, 5.5 * n), sharex=False, squeeze=False)
+    fig = _figure((11, 5.5 * n))
+    axes = fig.subplots(2 * n, 1, sharex=False, squeeze=False)
     ext = diag.extended
     for k, obs in enumerate(diag.observed):
         ax, axr = axes[2 * k, 0], axes[2 * k + 1, 0]
@@ -64,20 +69,15 @@ def plot_voltage(diag, path: Path) -> Path:
         axr.legend(loc="best", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 
 def plot_residuals(diag, path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     feats = [f for f in FEATURES if f in diag.residuals.eta2]
     cols = 3
     rows = max(1, math.ceil(len(feats) / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(13, 3.8 * rows), squeeze=False)
+    fig = _figure((13, 3.8 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
     for ax in axes.ravel()[len(feats):]:
         ax.axis("off")
     for ax, f in zip(axes.ravel(), feats):
@@ -95,19 +95,14 @@ def plot_residuals(diag, path: Path) -> Path:
     fig.suptitle("Baseline residual against the candidate features")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 
 def plot_candidates(diag, path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     rows = [("none (baseline)", diag.baseline.heldout_rmse_mV)] + [
         (c.cause, c.heldout_rmse_mV) for c in diag.candidates if c.applicable and math.isfinite(c.heldout_rmse_mV)]
-    fig, ax = plt.subplots(figsize=(8, 0.45 * len(rows) + 1.2))
+    fig = _figure((8, 0.45 * len(rows) + 1.2))
+    ax = fig.subplots()
     names = [r[0] for r in rows]
     vals = [r[1] for r in rows]
     colors = ["C3" if n == diag.cause else ("C0" if n.startswith("none") else "0.6") for n in names]
@@ -120,7 +115,6 @@ def plot_candidates(diag, path: Path) -> Path:
     ax.set_title(f"named cause: {diag.cause}")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 

@@ -31,6 +31,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from battery_predictor.diagnosis.candidates import candidate
+from battery_predictor.diagnosis.decision import (
+    BASELINE_FLOOR_FACTOR,
+    GAIN_THRESHOLD_PCT,
+    RESTORE_FACTOR,
+    RESTORE_MIN_GAIN_PCT,
+)
+
 #: Window (s) of the "direction of recent current" feature.
 DIRECTION_WINDOW_S = 600.0
 #: Features whose absolute correlation exceeds this are reported as not separable.
@@ -181,9 +189,6 @@ def evidence_text(cause: str, base, best, results, analysis: ResidualAnalysis, n
     says that the held-out comparison cannot tell that cause from a loss of accessible capacity with
     temperature. The caveat does not change the verdict, which rests on held-out prediction alone.
     """
-    from battery_predictor.diagnosis.candidates import candidate
-    from battery_predictor.diagnosis.diagnose import GAIN_THRESHOLD_PCT
-
     parts = [f"Baseline held-out RMSE {base.heldout_rmse_mV:.1f} mV (voltage noise {noise_mv:.1f} mV)."]
     ranked = [(f, e) for f, e in analysis.ranked() if e >= 0.05][:3]
     if ranked:
@@ -195,8 +200,6 @@ def evidence_text(cause: str, base, best, results, analysis: ResidualAnalysis, n
     if pairs:
         parts.append("Not separable in these recordings (they move together): " + "; ".join(pairs) + ".")
     if cause == "none":
-        from battery_predictor.diagnosis.diagnose import BASELINE_FLOOR_FACTOR, RESTORE_FACTOR, RESTORE_MIN_GAIN_PCT
-
         floor = noise_mv if floor_mv is None else floor_mv
         if base.heldout_rmse_mV <= BASELINE_FLOOR_FACTOR * floor:
             parts.append(f"The baseline predicts the held-out data within {BASELINE_FLOOR_FACTOR:.0f}x its error floor "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypedDict
 
 import numpy as np
 
@@ -120,7 +121,15 @@ def held_out_score(obs: Observed, sim: SimOut) -> HeldOut:
     return HeldOut(sq_err_sum=ss_res, n=int(err.size), r2_mod=r2, runtime_error_s=runtime)
 
 
-def pooled(scores: list[HeldOut]) -> dict[str, float | None]:
+class Pooled(TypedDict):
+    """Held-out scores pooled over recordings (:func:`pooled`)."""
+
+    heldout_rmse_mV: float
+    heldout_r2_mod: float
+    runtime_error_s: float | None
+
+
+def pooled(scores: list[HeldOut]) -> Pooled:
     """Pool recordings: RMSE (mV) over all held-out samples, mean R2_mod, mean runtime error (s)."""
     n = sum(s.n for s in scores)
     rmse = math.sqrt(sum(s.sq_err_sum for s in scores) / n) if n else float("nan")

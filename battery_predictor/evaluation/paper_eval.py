@@ -13,6 +13,7 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +28,7 @@ from battery_predictor.recording import Recording
 from battery_predictor.simulation import get_simulator
 
 #: The paper's figures, printed beside ours.
-PAPER = {
+PAPER: dict[str, Any] = {
     "table2": {("dynamic", "Chen2020"): (0.97, 0.95), ("dynamic", "NCA_Kim2011"): (0.55, -0.61),
                ("dynamic", "OKane2022"): (0.98, 0.93), ("static", "Chen2020"): (0.97, 0.94),
                ("static", "NCA_Kim2011"): (-0.51, 0.55), ("static", "OKane2022"): (0.97, 0.92)},
@@ -198,11 +199,11 @@ class RouteCase:
 
     recording: str
     payload_kg: float
-    predicted_v: tuple[float, float]
-    actual_v: tuple[float, float]
-    decisions: tuple[bool, bool, bool]
-    truth: tuple[bool | None, bool | None, bool | None]  # None: not known from the recording
-    reasons: tuple[str, str, str]
+    predicted_v: tuple[float, ...]  # after the first and the second cycle
+    actual_v: tuple[float, ...]
+    decisions: tuple[bool, ...]  # at the three states
+    truth: tuple[bool | None, ...]  # None: not known from the recording
+    reasons: tuple[str, ...]
 
 
 def route_truth_from_recording(rec: Recording, payload_kg: float, params: PackParams) -> dict:
@@ -262,6 +263,8 @@ def route_evaluation(params: PackParams, recs: Sequence[Recording],
 
     template = PredictorCore(PredictorConfig(params_file=params.source, stale_after_s=1e9), params=params)
     runner = template.runner
+    if runner is None:
+        raise InputDataError(f"{params.source}: no pack model to evaluate the routes with")
     threshold = float(params.thresholds["route_min_voltage_v"])
     i_stand = float(params.thresholds["standstill_current_a"])
     payloads = list(payloads_kg) if payloads_kg is not None else [None] * len(recs)
@@ -289,7 +292,9 @@ def route_evaluation(params: PackParams, recs: Sequence[Recording],
         t_rec = rec.relative_time_s
         # state at the end of the first standstill: the route proper starts there
         feeder.until(standstill)
-        temp0 = core._temperature(core.latest_state()[3])
+        latest = core.latest_state()
+        assert latest is not None  # the feeder has fed the standstill
+        temp0 = core._temperature(latest[3])
         run = runner.run(core.calibration(temp0).start, segs[1:] + segs, temp0)
         n1 = len(segs) - 1
         ends = run.segment_end_index
@@ -338,7 +343,7 @@ def _mean_before(t: np.ndarray, v: np.ndarray, end_idx: int, window_s: float) ->
 
 def route_summary(cases: Sequence[RouteCase]) -> dict:
     """MAE (V), MAPE (%) per cycle and overall, and decision accuracy."""
-    errs = {1: [], 2: []}
+    errs: dict[int, list[tuple[float, float]]] = {1: [], 2: []}
     for c in cases:
         for k in (1, 2):
             p, a = c.predicted_v[k - 1], c.actual_v[k - 1]

@@ -93,7 +93,9 @@ def bundled_recordings(bags: Path, pattern: str) -> list[str]:
 
 def predictor_peak_quantile() -> float:
     """The predictor's default load-peak quantile (``PredictorConfig.peak_current_quantile``)."""
-    return next(f.default for f in dataclasses.fields(PredictorConfig) if f.name == "peak_current_quantile")
+    default = next(f.default for f in dataclasses.fields(PredictorConfig) if f.name == "peak_current_quantile")
+    assert isinstance(default, float)
+    return default
 
 
 def check_recordings(ev: PaperEvaluation, bags: Path) -> None:
@@ -132,6 +134,7 @@ def evaluate_paper(ev: PaperEvaluation, *, log: Callable[[str], None] = lambda _
 def _table2_part(ev: PaperEvaluation, temi: PackParams, dyn: Sequence, summary: dict, figures: dict,
                  log: Callable[[str], None]) -> PackParams:
     """Table 2 and Fig. 4; returns the params the runtime part uses (Chen2020 fitted on the dynamic profile)."""
+    assert ev.temi_static is not None  # Table 2 is run only with the static recording
     static = trim_to_discharge(load_recording(ev.temi_static))
     log(f"Table 2: {len(ev.base_sets)} parameter sets x 2 profiles, {ev.trials} trials each ...")
     rows = table2(temi, dyn[0], static, base_sets=ev.base_sets, trials=ev.trials, seed=ev.seed,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
 from matplotlib.figure import Figure
@@ -102,7 +103,7 @@ def fig_routes(cases, threshold_v: float, out: Path) -> Path:
     return out
 
 
-def write_markdown(out_dir: Path, summary: dict, figures: dict[str, Path]) -> Path:
+def write_markdown(out_dir: Path, summary: dict, figures: Mapping[str, Path | None]) -> Path:
     """The report: tables with the paper's figures beside ours, and the figures."""
     lines = ["# Evaluation as in the seed paper (section 5)", "",
              "All recordings are the bundled **emulated** ones unless other files were given "

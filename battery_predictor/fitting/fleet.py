@@ -24,6 +24,7 @@ from battery_predictor.fitting.optimiser import TPEOptimiser
 from battery_predictor.fitting.problem import FitProblem
 from battery_predictor.fitting.space import fit_space
 from battery_predictor.params import PackParams
+from battery_predictor.processes import resident_mb
 
 #: Pack names become file and study names.
 PACK_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
@@ -140,8 +141,6 @@ def fit_fleet(params: PackParams, packs: Mapping[str, Sequence[str]], load: Call
     on_pack : callable, optional
         Called with each :class:`PackFit` as it is done.
     """
-    from battery_predictor.nodes.memory import resident_mb
-
     if simulator is None:
         from battery_predictor.simulation import get_simulator
 

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from battery_predictor.errors import ParamsError, SimulationError
+from battery_predictor.fitting.space import unit_to_value, value_to_unit
 from battery_predictor.ocp import cell_parameter_values
 from battery_predictor.params import INTERCONNECT_KEYS, PackParams
 from battery_predictor.recording import Recording
@@ -116,16 +117,11 @@ class Coordinate:
 
     def to_unit(self, value: float) -> float:
         """Position of ``value`` in the unit interval of the search box (0 = low, 1 = high)."""
-        if self.log:
-            return (math.log(value) - math.log(self.low)) / (math.log(self.high) - math.log(self.low))
-        return (value - self.low) / (self.high - self.low)
+        return value_to_unit(value, self.low, self.high, self.log)
 
     def from_unit(self, unit: float) -> float:
         """Inverse of :meth:`to_unit`."""
-        unit = min(max(float(unit), 0.0), 1.0)
-        if self.log:
-            return math.exp(math.log(self.low) + unit * (math.log(self.high) - math.log(self.low)))
-        return self.low + unit * (self.high - self.low)
+        return unit_to_value(unit, self.low, self.high, self.log)
 
     def contains(self, value: float) -> bool:
         """True when ``low <= value <= high``."""

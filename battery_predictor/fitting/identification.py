@@ -183,7 +183,7 @@ class IdentificationProblem:
         """Coordinate names in search order."""
         return [c.name for c in self.space]
 
-    def coordinates(self, unit: Sequence[float]) -> dict[str, float]:
+    def coordinates(self, unit: Sequence[float] | np.ndarray) -> dict[str, float]:
         """Coordinate values of a point of the unit cube."""
         return {c.name: c.from_unit(u) for c, u in zip(self.space, unit, strict=True)}
 
@@ -213,6 +213,7 @@ class IdentificationProblem:
 
     def residuals(self, coordinates: dict[str, float]) -> np.ndarray:
         """Concatenated weighted residuals; a failed simulation counts as a prediction at U_min."""
+        results: list[PackSimResult] | list[None]
         try:
             results, _ = self.simulate(coordinates)
         except SimulationError:

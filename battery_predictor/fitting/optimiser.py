@@ -7,15 +7,14 @@ failure, or a parameter combination whose initial state lies outside the cell's 
 window) never stops the fit: it is recorded as a *pruned* trial carrying the error in its
 ``error`` user attribute. Pruned rather than failed, because Optuna's TPE ignores failed
 trials but ranks pruned ones below every completed trial: the sampler learns to avoid
-infeasible regions instead of proposing them again (with Table 1 start values, 40 % of the
-trials of a Chen2020 fit were infeasible and the fit did not converge).
+infeasible regions instead of proposing them again (the measurement behind this rule:
+docs/findings.md, "Code notes (issue 15)").
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
-import multiprocessing
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -25,6 +24,7 @@ from battery_predictor.errors import BatteryPredictorError, SimulationError
 from battery_predictor.fitting.problem import FitProblem
 from battery_predictor.fitting.space import FitParameter
 from battery_predictor.fitting.storage import close_storage, open_storage, redacted, worker_id
+from battery_predictor.processes import ProcessPool, shared
 
 #: Startup (random) trials per searched parameter, as in the seed paper.
 STARTUP_TRIALS_PER_PARAMETER = 20
@@ -151,6 +151,12 @@ def _worker(storage: str, study_name: str, problem: FitProblem, space, seed: int
         close_storage(rdb)
 
 
+def _pool_worker(seed: int) -> None:
+    """A :class:`~battery_predictor.processes.ProcessPool` task: :func:`_worker` with the study the parent shared."""
+    storage, study_name, problem, space, n_startup, n_trials_total = shared("tpe_worker")
+    _worker(storage, study_name, problem, space, seed, n_startup, n_trials_total)
+
+
 class TPEOptimiser:
     """Seeded Optuna TPE.
 
@@ -243,25 +249,20 @@ class TPEOptimiser:
             if n >= self.n_trials:
                 study.stop()
 
-        procs = []
         if remaining > 0:
-            if self.workers > 1:
-                ctx = multiprocessing.get_context("fork")
-                for k in range(1, self.workers):
-                    proc = ctx.Process(target=_worker, args=(self.storage, name, problem, space, self.seed + k,
-                                                             n_startup, self.n_trials), daemon=True)
-                    proc.start()
-                    procs.append(proc)
-            try:
-                study.optimize(_objective_factory(problem, space), n_trials=remaining, catch=(SimulationError,),
-                               callbacks=[on_trial])
-            finally:
-                for proc in procs:
-                    proc.join(timeout=600)
-                    if proc.is_alive():
-                        proc.terminate()
-                if bar is not None:
-                    bar.close()
+            # the other workers run in forked processes beside this one, on the same study (each its own seed)
+            helpers = self.workers - 1 if self.workers > 1 else 0
+            args = (self.storage, name, problem, space, n_startup, self.n_trials)
+            with ProcessPool(helpers, shared={"tpe_worker": args}, background=True) as pool:
+                running = [pool.start(_pool_worker, self.seed + k) for k in range(1, helpers + 1)]
+                try:
+                    study.optimize(_objective_factory(problem, space), n_trials=remaining, catch=(SimulationError,),
+                                   callbacks=[on_trial])
+                finally:
+                    for job in running:
+                        job.wait(timeout=600)
+                    if bar is not None:
+                        bar.close()
         trials = study.get_trials(deepcopy=False)
         complete = [t for t in trials if t.state == TrialState.COMPLETE]
         failed = [t for t in trials if t.state in (TrialState.FAIL, TrialState.PRUNED)]

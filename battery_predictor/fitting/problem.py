@@ -12,6 +12,7 @@ from battery_predictor.fitting.cost import r2_mod, rmse_v
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording
 from battery_predictor.simulation.base import PackSimResult, PackSimulator, SimulationRequest
+from battery_predictor.simulation.extensions import current_offset_a
 from battery_predictor.simulation.load import StepLoad
 
 #: Below this |current| / nominal capacity (1/h) a recording is taken to start at rest.
@@ -47,8 +48,6 @@ def request_for_recording(params: PackParams, rec: Recording, *, initial_state: 
         Continue past the recording for this many seconds at the recording's mean current, so
         that a model which would end later than the measurement shows it (R2_mod's late case).
     """
-    from battery_predictor.diagnosis.extensions_impl import current_offset_a
-
     # extension current_offset: the cells carry the measured current minus the sensor's offset
     load = StepLoad.from_samples(rec.time_s, rec.current_a - current_offset_a(params))
     if extend_s > 0:

@@ -1,7 +1,8 @@
-"""Fit parameters and their bounds (seed paper, step 4)."""
+"""Fit parameters, their bounds (seed paper, step 4) and the unit-cube mapping every search uses."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from battery_predictor.errors import ParamsError
@@ -17,6 +18,31 @@ INTERCONNECT_FACTORS = (0.1, 10.0)
 #: maximum concentration (the smallest maximum searched, when that is fitted too): outside it
 #: the electrode is over-full or empty and no simulation can start.
 INITIAL_STOICHIOMETRY_RANGE = (0.01, 0.99)
+
+
+def unit_to_value(unit: float, low: float, high: float, log: bool = False) -> float:
+    """The value at ``unit`` (clamped to 0..1) of the search interval ``low..high``; on a log scale when ``log``.
+
+    Parameters
+    ----------
+    unit : float
+        Position in the unit interval (0 = ``low``, 1 = ``high``).
+    low, high : float
+        The search bounds (the parameter's unit; both > 0 when ``log``).
+    log : bool
+        Search on a log scale.
+    """
+    unit = min(max(float(unit), 0.0), 1.0)
+    if log:
+        return math.exp(math.log(low) + unit * (math.log(high) - math.log(low)))
+    return low + unit * (high - low)
+
+
+def value_to_unit(value: float, low: float, high: float, log: bool = False) -> float:
+    """Inverse of :func:`unit_to_value`: the position of ``value`` in ``low..high`` (not clamped)."""
+    if log:
+        return (math.log(value) - math.log(low)) / (math.log(high) - math.log(low))
+    return (value - low) / (high - low)
 
 
 @dataclass(frozen=True)

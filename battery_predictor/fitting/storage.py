@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import socket
 import time
+from typing import Any
 
 from battery_predictor.errors import BatteryPredictorError
 
@@ -62,7 +63,7 @@ def open_storage(url: str | None):
         except ImportError:
             raise BatteryPredictorError(f"storage {redacted(url)}: PostgreSQL needs the psycopg package "
                                         "(pip install -r requirements.txt)") from None
-    kwargs = {"pool_pre_ping": True}
+    kwargs: dict[str, Any] = {"pool_pre_ping": True}
     if url.startswith("sqlite"):
         kwargs = {"connect_args": {"timeout": 60}}  # several processes on one file wait for its lock
     pause = OPEN_PAUSE_S

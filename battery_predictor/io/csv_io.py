@@ -166,7 +166,7 @@ def _read_table(path: Path) -> _Table:
     return _Table(path, header, rows, lines)
 
 
-def _where(table: _Table, k: int, row_numbers: Sequence[int] | None = None) -> str:
+def _where(table: _Table, k: int, row_numbers: Sequence[int] | np.ndarray | None = None) -> str:
     """'line N (data row M)' for row index k of the (possibly filtered) table."""
     row = row_numbers[k] if row_numbers is not None else k + 1
     return f"line {table.lines[row - 1]} (data row {row})"

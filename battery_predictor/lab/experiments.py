@@ -51,6 +51,7 @@ from battery_predictor.jsonutil import json_default as _json_default
 from battery_predictor.lab import LAB_VERSION
 from battery_predictor.lab.instruments import InstrumentSpec, measure
 from battery_predictor.lab.real_pack import SURFACE_18650_M2, SURFACE_32700_M2, RealPack, RealPackSpec
+from battery_predictor.processes import ProcessPool
 from battery_predictor.simulation.load import StepLoad
 
 #: liionpack step period of the real pack in s (= the averaging window, so windows and steps align).
@@ -328,7 +329,7 @@ def _run_to_stop_voltage(exp: ExperimentSpec, pack: RealPack, profile, stop_v: f
     trace = pack.simulate(load, ambient_temperature_k=exp.ambient_temperature_k,
                           stop_pack_voltage_v=stop_v - STOP_MARGIN_V, stop_extra_steps=2, period_s=PERIOD_S)
     m = measure(trace, instruments, seed=exp.instrument_seed, stop_voltage_v=stop_v, source=exp.name)
-    if not m.stopped:
+    if not m.stopped or m.stop_time_s is None:
         raise SimulationError(f"{exp.name}: the real pack never reached {stop_v:.2f} V "
                               f"(simulation ended by {trace.termination} at {trace.end_s:.0f} s)")
     runtime = float(m.stop_time_s)
@@ -393,10 +394,12 @@ def run_route(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec):
     params = pack.base_params
     threshold = float(params.thresholds.get("route_min_voltage_v", ROUTE_THRESHOLD_V))
     currents = load_ranger_currents()
+    if exp.payload_kg is None:
+        raise SimulationError(f"{exp.name}: a route experiment needs a payload_kg")
     route = longest_route(exp.payload_kg)
     cycle = route_profile(route, currents, seed=exp.profile_seed, mode="sampled")
     standstill_s = float(cycle.duration_s[-1])
-    if cycle.labels[-1] != "standstill":
+    if cycle.point_labels[-1] != "standstill":
         raise SimulationError(f"{exp.name}: the route profile does not end with a standstill")
     period = cycle.total_duration_s
     two = StepLoad.from_profile(cycle.repeat(2))
@@ -538,23 +541,12 @@ def make_bags(out_dir: str | Path, only: Sequence[str] | None = None, *, jobs: i
     exps = find_experiments(only)
     args = [(e, str(out_dir), None if params_dir is None else str(params_dir)) for e in exps]
     results: dict[str, dict[str, Any]] = {}
-    if jobs <= 1 or len(exps) <= 1:
-        for a in args:
-            res = _run_one(a)
+    workers = jobs if len(exps) > 1 else 1
+    # several workers: the costliest experiments first, so that the workers finish together
+    order = sorted(args, key=lambda a: -a[0].cost()) if workers > 1 else args
+    with ProcessPool(workers, start_method="spawn") as pool:
+        for res in pool.imap_unordered(_run_one, order):
             results[res["name"]] = res
             if progress:
                 progress(res)
-    else:
-        import concurrent.futures
-        import multiprocessing
-
-        order = sorted(args, key=lambda a: -a[0].cost())
-        ctx = multiprocessing.get_context("spawn")
-        with concurrent.futures.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-            futures = [pool.submit(_run_one, a) for a in order]
-            for fut in concurrent.futures.as_completed(futures):
-                res = fut.result()
-                results[res["name"]] = res
-                if progress:
-                    progress(res)
     return [results[e.name] for e in exps]

@@ -34,7 +34,7 @@ while PyBaMM orders a model's inputs alphabetically. Any input whose name
 sorts before ``"Current function [A]"`` (``"Contact resistance [Ohm]"``,
 ``"Ambient temperature [K]"``...) or inputs given out of alphabetical order
 are silently swapped (the current becomes the contact resistance and vice
-versa). :meth:`RealPack.simulate` therefore passes the inputs sorted and
+versa). :func:`~battery_predictor.simulation.liionpack_sim.solve_liionpack` therefore passes the inputs sorted and
 renames every parameter that would sort before the current (the parameter
 is set to a :class:`pybamm.InputParameter` named ``"Per-cell <name>"``).
 
@@ -49,6 +49,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -56,17 +57,7 @@ import numpy as np
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.params import PackParams
-from battery_predictor.simulation.cell_setup import (
-    build_model,
-    initial_concentrations,
-    prepared_parameter_values,
-    quiet_pybamm,
-)
-from battery_predictor.simulation.liionpack_sim import (  # noqa: F401 (re-exported names)
-    CURRENT_INPUT,
-    RENAMED_INPUT_PREFIX,
-    liionpack_input_name,
-)
+from battery_predictor.simulation.liionpack_sim import pack_terminal_nodes, solve_liionpack
 from battery_predictor.simulation.load import StepLoad
 
 #: Per-cell temperature variable recorded from every cell.
@@ -222,11 +213,6 @@ class PackTrace:
         return float(np.mean(self.voltage_v[keep]))
 
 
-def input_name(key: str) -> str:
-    """Name under which a per-cell PyBaMM parameter is passed to liionpack (see module docstring)."""
-    return liionpack_input_name(key)
-
-
 def real_pack_params(params: PackParams, spec: RealPackSpec) -> PackParams:
     """The params of the real pack's mean cell: model, options and extra values of ``spec``."""
     import pybamm
@@ -364,64 +350,33 @@ class RealPack:
         SimulationError
             When liionpack fails.
         """
-        import liionpack as lp
-        import pybamm
-
         tic = time.perf_counter()
-        lp.set_logging_level("ERROR")
-        import liionpack.solvers  # noqa: F401  (so quiet_pybamm can silence its progress bar)
-
         params = self.params
         stepped = load.resample(period_s)
-        pv = prepared_parameter_values(params)
         temperature_k = float(ambient_temperature_k or params.ambient_temperature_k)
-        pv["Ambient temperature [K]"] = temperature_k
-        pv["Initial temperature [K]"] = temperature_k
-        c_n0, c_p0 = initial_concentrations(params, pv, initial_soc=initial_soc, initial_cell_ocv_v=None)
-        pv["Initial concentration in negative electrode [mol.m-3]"] = c_n0
-        pv["Initial concentration in positive electrode [mol.m-3]"] = c_p0
-        inputs: dict[str, np.ndarray] = {}
-        for key, values in self.cell_inputs.items():
-            name = input_name(key)
-            pv[key] = pybamm.InputParameter(name)
-            inputs[name] = np.asarray(values, dtype=float)
-        inputs = dict(sorted(inputs.items()))
-        ic = params.interconnect
-        netlist = lp.setup_circuit(Np=params.parallel, Ns=params.series, Rb=ic["r_b_ohm"], Rc=ic["r_c_ohm"],
-                                   Ri=ic["r_i_ohm"], Rt=ic["r_t_ohm"], I=float(stepped.current_a[0]), V=3.5)
-        i_map = netlist["desc"].str.find("I") > -1
-        node_a, node_b = (int(n) for n in netlist.loc[i_map, ["node2", "node1"]].values.flatten())
         state: dict[str, Any] = {"calls": 0, "trigger": None, "stopped": False}
 
-        def node_termination(v_node) -> bool:
-            # liionpack calls this once per step with the node voltages under the step's current
-            state["calls"] += 1
-            if stop_pack_voltage_v is None:
+        def node_termination(netlist) -> Callable[[np.ndarray], bool]:
+            node_a, node_b = pack_terminal_nodes(netlist)
+
+            def stop(v_node) -> bool:
+                # liionpack calls this once per step with the node voltages under the step's current
+                state["calls"] += 1
+                if stop_pack_voltage_v is None:
+                    return False
+                if state["trigger"] is None and float(v_node[node_b] - v_node[node_a]) <= stop_pack_voltage_v:
+                    state["trigger"] = state["calls"]
+                if state["trigger"] is not None and state["calls"] - state["trigger"] >= max(1, int(stop_extra_steps)):
+                    state["stopped"] = True
+                    return True
                 return False
-            if state["trigger"] is None and float(v_node[node_b] - v_node[node_a]) <= stop_pack_voltage_v:
-                state["trigger"] = state["calls"]
-            if state["trigger"] is not None and state["calls"] - state["trigger"] >= max(1, int(stop_extra_steps)):
-                state["stopped"] = True
-                return True
-            return False
 
-        experiment = pybamm.Experiment(
-            [pybamm.step.current(np.column_stack([stepped.start_s, stepped.current_a]), period=period_s)],
-            period=f"{period_s} seconds",
-        )
+            return stop
 
-        def sim_func(parameter_values):
-            return pybamm.Simulation(model=build_model(params, for_liionpack=True), parameter_values=parameter_values,
-                                     solver=pybamm.CasadiSolver(mode="safe"))
-
-        try:
-            with quiet_pybamm():
-                out = lp.solve(netlist=netlist, sim_func=sim_func, parameter_values=pv, experiment=experiment,
-                               inputs=inputs, initial_soc=None, nproc=1, manager="casadi",
-                               output_variables=[TEMPERATURE_VARIABLE], node_termination_func=node_termination)
-        except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError, KeyError) as exc:
-            raise SimulationError(f"real pack {self.spec.pack_id}: liionpack failed: {str(exc).splitlines()[0]}") \
-                from None
+        out = solve_liionpack(params, stepped, period_s, temperature_k=temperature_k, initial_soc=initial_soc,
+                              cell_inputs=self.cell_inputs, initial_cell_voltage_v=3.5,
+                              output_variables=[TEMPERATURE_VARIABLE], node_termination=node_termination,
+                              failure=f"real pack {self.spec.pack_id}: liionpack failed")
         t = np.asarray(out["Time [s]"], dtype=float)
         if t.size < 2:
             raise SimulationError(f"real pack {self.spec.pack_id}: liionpack produced {t.size} steps")

@@ -105,15 +105,3 @@ def configure_process(environ: MutableMapping[str, str] | None = None, *, alloca
     if libc is not None and libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES) == 1:
         changed.append(f"malloc mmap threshold: {MMAP_THRESHOLD_BYTES} B")
     return changed
-
-
-def resident_mb(pid: int | None = None) -> float:
-    """Resident memory (VmRSS) of process ``pid`` (default: this one) in MB; NaN where /proc is missing."""
-    try:
-        with open(f"/proc/{pid or os.getpid()}/status") as fh:
-            for line in fh:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return float("nan")

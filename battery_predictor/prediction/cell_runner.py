@@ -11,7 +11,7 @@ costs a few milliseconds.
 With the extension ``cell_imbalance`` the pack holds ``series - 1`` normal groups and one
 weak group, as in the fast simulator: a second model, built for one cell of the weak group
 (electrode height scaled by the weak fraction,
-:func:`~battery_predictor.diagnosis.extensions_impl.weak_group_params`), is stepped with the
+:func:`~battery_predictor.simulation.extensions.weak_group_params`), is stepped with the
 same segments and inputs; the pack voltage is ``(series - 1) * V_normal + V_weak - I_pack * R_eq``
 and the run ends when either group reaches its lower cut-off. Both groups start from the same
 SOC (same stoichiometries; the weak group only holds less charge), so the pack's usable capacity
@@ -32,6 +32,12 @@ import numpy as np
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.cell_setup import build_model, model_options, prepared_parameter_values, quiet_pybamm
+from battery_predictor.simulation.extensions import (
+    current_offset_a,
+    series_resistance_factor,
+    weak_group_fraction,
+    weak_group_params,
+)
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 _CURRENT = "Current function [A]"
@@ -149,12 +155,6 @@ class PackRunner:
     def __init__(self, params, samples_per_segment: int = 4, max_spacing_s: float = 30.0) -> None:
         from dataclasses import replace
 
-        from battery_predictor.diagnosis.extensions_impl import (
-            current_offset_a,
-            weak_group_fraction,
-            weak_group_params,
-        )
-
         self.params = params
         self.samples_per_segment = samples_per_segment
         self.max_spacing_s = max_spacing_s
@@ -235,8 +235,6 @@ class PackRunner:
         lower cut-off (with ``cell_imbalance``: a cell of either group).
         """
         import pybamm
-
-        from battery_predictor.diagnosis.extensions_impl import series_resistance_factor
 
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
             raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")

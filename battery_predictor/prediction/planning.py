@@ -379,7 +379,8 @@ def leg_sections(route: StationPath, origin: str, goal: str, payload_kg: float, 
             name = f"standstill at {goal}"
             return [RouteSection(name, 0.0, FLAT, payload_kg, speed_m_s, standstill_s, name)]
         return []
-    out, seen = [], {}
+    out: list[RouteSection] = []
+    seen: dict[str, int] = {}
     for i, segment in enumerate(route.segments):
         seen[segment.slope] = seen.get(segment.slope, 0) + 1
         suffix = f" {seen[segment.slope]}" if seen[segment.slope] > 1 else ""

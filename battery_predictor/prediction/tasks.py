@@ -39,6 +39,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -396,7 +397,8 @@ class TaskPlanner:
         duration = sum(d for d, _ in segments)
         mean_a = sum(d * i for d, i in segments) / duration
         run = self.runner.run(start, segments, self.temperature_k)
-        base = dict(name=task.name, kind=task.kind, duration_s=duration, current_a=mean_a, end_location=end)
+        base: dict[str, Any] = dict(name=task.name, kind=task.kind, duration_s=duration, current_a=mean_a,
+                                    end_location=end)
         if run.reached_cutoff or run.final_state is None:
             t_low = time_to_voltage_s(run.time_s, run.pack_voltage_v, self.cutoff_voltage_v)
             when = f"the pack falls to {self.cutoff_voltage_v:.2f} V {t_low / 60:.1f} min" if t_low is not None \
@@ -437,6 +439,8 @@ class TaskPlanner:
 
     def _at_risk(self, start, after, task: Task, task_s: float, segments, low_v: float) -> tuple[float, float]:
         """(probability that the lowest voltage stays above the cut-off, the lowest voltage at the risk), V."""
+        risk = self.risk
+        assert risk is not None  # asked only with a risk
         soc0 = self.runner.soc_of(start) if not isinstance(start, (int, float)) else float(start)
         charge_ah = sum(d * i for d, i in segments) / 3600.0
         std_a = 0.0
@@ -449,8 +453,8 @@ class TaskPlanner:
             return math.nan if run.reached_cutoff else float(np.min(run.pack_voltage_v))
 
         spread = route_spread(self.runner, soc0, self.runner.soc_of(after), charge_ah, charge_sigma_ah,
-                              self.temperature_k, self.risk.model, self.risk.state_voltage_sigma_v, lowest_at)
-        return spread.probability_above(low_v - self.cutoff_voltage_v), spread.voltage_at_risk_v(low_v, self.risk.risk)
+                              self.temperature_k, risk.model, risk.state_voltage_sigma_v, lowest_at)
+        return spread.probability_above(low_v - self.cutoff_voltage_v), spread.voltage_at_risk_v(low_v, risk.risk)
 
     def max_time_s(self, start, location: str, current_a: float) -> float:
         """Longest time (s) at ``current_a`` from ``start`` that still leaves the walk back (to

@@ -126,7 +126,8 @@ def uncertainty_model(provenance: Mapping[str, Any], series: int, reference_temp
         Temperature of the fit data, K.
     """
     sources = []
-    calibrated = provenance.get("uncertainty") if isinstance(provenance.get("uncertainty"), Mapping) else {}
+    stored = provenance.get("uncertainty")
+    calibrated: Mapping[str, Any] = stored if isinstance(stored, Mapping) else {}
     runtime_sigma = _finite_positive(calibrated.get("runtime_log_sigma"))
     if runtime_sigma is None:
         runtime_sigma = DEFAULT_RUNTIME_LOG_SIGMA
@@ -157,7 +158,8 @@ def arrhenius_equivalent_temperature_k(temperature_k: float, reference_temperatu
     return 1.0 / inverse
 
 
-def future_load_sigma(stamps_s: Sequence[float], demand: Sequence[float], horizon_s: float) -> float:
+def future_load_sigma(stamps_s: Sequence[float] | np.ndarray, demand: Sequence[float] | np.ndarray,
+                      horizon_s: float) -> float:
     """Relative standard deviation of the mean demand over the next ``horizon_s`` s.
 
     The present cycle's windows (stamps in s, demand in A or W) are pooled into

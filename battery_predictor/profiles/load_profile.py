@@ -95,6 +95,12 @@ class LoadProfile:
         return len(self.duration_s)
 
     @property
+    def point_labels(self) -> tuple[str, ...]:
+        """The label of every curve point (``labels`` as a tuple: never None once constructed)."""
+        assert self.labels is not None  # set by __post_init__
+        return self.labels
+
+    @property
     def n_points(self) -> int:
         """Number of curve points."""
         return len(self.duration_s)
@@ -180,7 +186,7 @@ class LoadProfile:
         return LoadProfile(
             duration_s=np.concatenate((self.duration_s, other.duration_s)),
             current_a=np.concatenate((self.current_a, other.current_a)),
-            labels=self.labels + other.labels,
+            labels=self.point_labels + other.point_labels,
             metadata=dict(self.metadata),
         )
 
@@ -192,7 +198,7 @@ class LoadProfile:
         return LoadProfile(
             duration_s=np.tile(self.duration_s, n),
             current_a=np.tile(self.current_a, n),
-            labels=self.labels * n,
+            labels=self.point_labels * n,
             metadata=dict(self.metadata),
         )
 
@@ -212,7 +218,7 @@ class LoadProfile:
         with path.open("w", newline="", encoding="utf-8") as handle:
             writer = csv.writer(handle)
             writer.writerow(CSV_COLUMNS)
-            for duration, current, label in zip(self.duration_s, self.current_a, self.labels):
+            for duration, current, label in zip(self.duration_s, self.current_a, self.point_labels):
                 writer.writerow((repr(float(duration)), repr(float(current)), label))
         return path
 
@@ -255,7 +261,7 @@ class LoadProfile:
     def label_summary(self) -> dict[str, dict[str, float]]:
         """Points, duration in s and charge in Ah per label, in order of first appearance."""
         summary: dict[str, dict[str, float]] = {}
-        for label, duration, current in zip(self.labels, self.duration_s, self.current_a):
+        for label, duration, current in zip(self.point_labels, self.duration_s, self.current_a):
             entry = summary.setdefault(label, {"points": 0, "duration_s": 0.0, "charge_ah": 0.0})
             entry["points"] += 1
             entry["duration_s"] += float(duration)

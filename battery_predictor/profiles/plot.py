@@ -63,7 +63,7 @@ def plot_profile(profile: LoadProfile, path: str | Path, *, title: str | None = 
         (np.column_stack((starts, previous)), np.column_stack((starts, current)), np.column_stack((ends, current))),
         axis=1,
     )
-    labels = list(dict.fromkeys(profile.labels))
+    labels = list(dict.fromkeys(profile.point_labels))
     colours = _colours(len(labels))
     label_array = np.array(profile.labels, dtype=object)
     for label, colour in zip(labels, colours):

@@ -247,7 +247,7 @@ def load_ranger_currents(path: str | Path | None = None) -> RangerCurrents:
         raise ParamsError(f"{path}: payload_levels_kg must not exceed {MAX_PAYLOAD_KG:g} kg")
     samples = require(data, "samples_a", path, "")
     check_unknown(samples, set(SLOPES), path, "samples_a")
-    parsed: dict[str, dict[float, list[float]]] = {}
+    parsed: dict[str, dict[float, Sequence[float]]] = {}
     for slope in SLOPES:
         by_payload = require(samples, slope, path, "samples_a")
         if not isinstance(by_payload, dict):

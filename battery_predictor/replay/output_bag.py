@@ -65,7 +65,7 @@ class OutputBag:
         if self.path.exists():
             raise BagError(f"{self.path}: output bag already exists (choose another --out or remove it)")
         self._ts = output_typestore()
-        self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self._writer: Writer | None = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
         for key, value in (metadata or {}).items():
             self._writer.set_custom_data(str(key), json.dumps(value, default=str))
@@ -76,6 +76,7 @@ class OutputBag:
     def write(self, topic: str, msgtype: str, time_ns: int, data: bytes) -> None:
         """Append one message (``time_ns``: log time)."""
         with self._lock:
+            assert self._writer is not None, "write after close"
             conn = self._conns.get(topic)
             if conn is None:
                 conn = self._conns[topic] = self._writer.add_connection(topic, msgtype, typestore=self._ts)

@@ -6,10 +6,19 @@ import contextlib
 import logging
 import os
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
 from battery_predictor.errors import SimulationError
+from battery_predictor.params import PackParams
+from battery_predictor.simulation.extensions import (
+    THERMAL_DEFAULTS,
+    apply_extension_parameter_values,
+    cooling_area_m2,
+    extension_model_options,
+    extension_model_type,
+)
 
 #: PyBaMM parameters that may be turned into ``[input]`` parameters without a rebuild
 #: (they do not change the mesh or the model structure). Geometric lengths (thickness,
@@ -71,23 +80,19 @@ def _silence_liionpack_tqdm() -> None:
     if solvers is not None and not isinstance(getattr(solvers, "tqdm", None), functools.partial):
         import tqdm
 
-        solvers.tqdm = functools.partial(tqdm.tqdm, disable=True)
+        vars(solvers)["tqdm"] = functools.partial(tqdm.tqdm, disable=True)
 
 
-def model_options(params) -> dict:
+def model_options(params: PackParams) -> dict[str, Any]:
     """PyBaMM model options for ``params`` (file options plus active extensions)."""
-    from battery_predictor.diagnosis.extensions_impl import extension_model_options
-
     opts = dict(params.options)
     opts.update(extension_model_options(params))
     return opts
 
 
-def build_model(params, *, for_liionpack: bool = False):
+def build_model(params: PackParams, *, for_liionpack: bool = False) -> Any:
     """A fresh PyBaMM model of the params' type (SPM, SPMe or DFN) with its options."""
     import pybamm
-
-    from battery_predictor.diagnosis.extensions_impl import extension_model_type
 
     cls = {"SPM": pybamm.lithium_ion.SPM, "SPMe": pybamm.lithium_ion.SPMe, "DFN": pybamm.lithium_ion.DFN}[
         extension_model_type(params)
@@ -103,26 +108,20 @@ def build_model(params, *, for_liionpack: bool = False):
     return model
 
 
-def prepared_parameter_values(params):
+def prepared_parameter_values(params: PackParams) -> Any:
     """Parameter values ready to simulate a discharge (upper cut-off event relaxed).
 
     A lumped thermal cell (:func:`is_lumped_thermal`) whose base set lacks thermal values (Prada2013)
     gets those of the extension ``temperature`` (Chen2020's, the cooling surface of a cylinder of the
-    cell volume; :data:`~battery_predictor.diagnosis.extensions_impl.THERMAL_DEFAULTS`).
+    cell volume; :data:`~battery_predictor.simulation.extensions.THERMAL_DEFAULTS`).
     """
-    from battery_predictor.diagnosis.extensions_impl import (
-        THERMAL_DEFAULTS,
-        _cooling_area_m2,
-        apply_extension_parameter_values,
-    )
-
     pv = apply_extension_parameter_values(params, params.parameter_values())
     pv["Upper voltage cut-off [V]"] = max(float(pv["Upper voltage cut-off [V]"]), RELAXED_UPPER_CUTOFF_V)
     if is_lumped_thermal(params):
         keys = set(pv.keys())
         missing = {k: v for k, v in THERMAL_DEFAULTS.items() if k not in keys}
         if "Cell cooling surface area [m2]" not in keys and "Cell volume [m3]" in keys:
-            missing["Cell cooling surface area [m2]"] = _cooling_area_m2(float(pv["Cell volume [m3]"]))
+            missing["Cell cooling surface area [m2]"] = cooling_area_m2(float(pv["Cell volume [m3]"]))
         if missing:
             pv.update(missing, check_already_exists=False)
     return pv
@@ -132,12 +131,12 @@ def prepared_parameter_values(params):
 THERMAL_MODES = ("params", "isothermal", "lumped")
 
 
-def is_lumped_thermal(params) -> bool:
+def is_lumped_thermal(params: PackParams) -> bool:
     """True when ``params`` ask PyBaMM's lumped thermal model (``cell.options: {thermal: lumped}``)."""
     return model_options(params).get("thermal", "isothermal") == "lumped"
 
 
-def with_thermal(params, mode: str):
+def with_thermal(params: PackParams, mode: str) -> PackParams:
     """``params`` with the cell's thermal model set by a command line's ``--thermal``.
 
     ``"params"`` keeps the params' own (``cell.options``; isothermal unless they say
@@ -156,7 +155,8 @@ def with_thermal(params, mode: str):
     return replace(params, options=options)
 
 
-def initial_concentrations(params, pv, *, initial_soc: float | None, initial_cell_ocv_v: float | None):
+def initial_concentrations(params: PackParams, pv: Any, *, initial_soc: float | None,
+                           initial_cell_ocv_v: float | None) -> tuple[float, float]:
     """Initial electrode concentrations (mol/m3) for an SOC or an open-circuit voltage.
 
     Returns the params' own initial concentrations when both are None.

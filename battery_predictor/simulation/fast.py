@@ -33,6 +33,7 @@ from battery_predictor.simulation.cell_setup import (
     quiet_pybamm,
 )
 from battery_predictor.simulation.engine.pack import pack_voltage_v
+from battery_predictor.simulation.extensions import series_resistance_factor, weak_group_fraction, weak_group_params
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 #: Width (s) of the ramp that stands for each current step in the interpolant.
@@ -90,9 +91,8 @@ class FastPackSimulator:
         input_keys = set(ALWAYS_INPUT_KEYS) | (INPUT_SAFE_KEYS & set(params.cell_values))
         if mapped:
             input_keys |= set(THICKNESS_TO_FRACTION.values())
-        input_keys = sorted(input_keys)
         inputs = {}
-        for key in input_keys:
+        for key in sorted(input_keys):
             if key in ("Ambient temperature [K]", "Initial temperature [K]"):
                 inputs[key] = temperature_k
             elif key == "Initial concentration in negative electrode [mol.m-3]":
@@ -114,8 +114,6 @@ class FastPackSimulator:
         except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError) as exc:
             raise SimulationError(f"fast simulation failed: {str(exc).splitlines()[0]}") from None
         result = self._result(params, request, sol, tic)
-        from battery_predictor.diagnosis.extensions_impl import weak_group_fraction
-
         if weak_group_fraction(params) != 1.0:  # extension cell_imbalance: one weaker series group
             result = self._with_weak_group(params, request, result, tic)
         return result
@@ -123,8 +121,6 @@ class FastPackSimulator:
     def _with_weak_group(self, params, request: SimulationRequest, main: PackSimResult, tic: float) -> PackSimResult:
         """Pack of ``series - 1`` normal groups and one weak group (a second single-group run)."""
         from dataclasses import replace
-
-        from battery_predictor.diagnosis.extensions_impl import weak_group_params
 
         ocv = None if request.initial_pack_ocv_v is None else request.initial_pack_ocv_v / params.series
         weak = self.simulate(replace(weak_group_params(params), series=1), replace(request, initial_pack_ocv_v=ocv))
@@ -194,12 +190,10 @@ class FastPackSimulator:
         v_cell = np.asarray(sol["Terminal voltage [V]"](t_eval), dtype=float)
         i_pack = load.current_at(t_out)
         p = params.interconnect
-        r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
-                                                 p["r_t_ohm"])
+        r_eq: float | np.ndarray = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"],
+                                                                     p["r_c_ohm"], p["r_t_ohm"])
         if "temperature" in params.extensions:  # extension temperature: Arrhenius series and cell resistance
-            from battery_predictor.diagnosis.extensions_impl import series_resistance_factor as temperature_factor
-
-            r_eq = r_eq * temperature_factor(
+            r_eq = r_eq * series_resistance_factor(
                 params, np.asarray(sol["Volume-averaged cell temperature [K]"](t_eval), dtype=float))
         v_pack = pack_voltage_v(v_cell, i_pack, series=params.series, r_eq_ohm=r_eq)
         if not np.all(np.isfinite(v_pack)):

@@ -31,9 +31,9 @@ from battery_predictor_msgs.msg import RouteSection
 from battery_predictor_msgs.srv import CanAcceptRoute
 from rclpy.context import Context
 
-from battery_predictor.diagnosis.extensions_impl import WEAK_FRACTION as WEAK_FRACTION_KEY
 from battery_predictor.nodes.replay_session import ReplaySession
 from battery_predictor.replay import read_replay_stream
+from battery_predictor.simulation.extensions import WEAK_FRACTION as WEAK_FRACTION_KEY
 
 pytestmark = pytest.mark.ros
 

@@ -37,9 +37,9 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import BatteryState
 
 from battery_predictor.conventions import internal_current_to_battery_state
-from battery_predictor.nodes.memory import resident_mb
 from battery_predictor.nodes.messages import ns_to_stamp, route_section_msgs
 from battery_predictor.nodes.replay_session import ReplaySession
+from battery_predictor.processes import resident_mb
 from battery_predictor.profiles.ranger import longest_route
 from battery_predictor.replay import BagMessage, stream_from_messages
 

@@ -8,9 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.diagnosis.diagnose import CandidateResult, combine_folds, diagnose, fold_observed
+from battery_predictor.diagnosis.diagnose import combine_folds, diagnose, fold_observed
 from battery_predictor.diagnosis.engine import SimOut, observe
 from battery_predictor.diagnosis.residuals import ResidualAnalysis, evidence_text
+from battery_predictor.diagnosis.results import CandidateResult
 from battery_predictor.diagnosis.scoring import held_out_score
 from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.params import load_params

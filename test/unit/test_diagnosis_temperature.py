@@ -9,11 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.diagnosis import extensions_impl as ext
 from battery_predictor.diagnosis.diagnose import rest_soc_box
 from battery_predictor.diagnosis.engine import Engine, observe
+from battery_predictor.diagnosis.reference import reference_anchor_k
 from battery_predictor.params import load_params
 from battery_predictor.recording import Recording
+from battery_predictor.simulation import extensions as ext
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
 
@@ -114,7 +115,7 @@ def test_reference_anchor_is_the_mean_temperature_where_the_reference_discharges
     rest_after = np.where(t < 80, 5.0, 0.0)  # discharges until t = 79, then rests (and cools)
     warm = np.where(t < 80, 298.15 + 0.4 * t, 300.0)  # self-heats to 329.75 K at the end of the discharge
     cool = np.full(t.size, 298.15)
-    anchor_k = ext.reference_anchor_k([warm, cool], [rest_after, np.full(t.size, 1.0)])
+    anchor_k = reference_anchor_k([warm, cool], [rest_after, np.full(t.size, 1.0)])
     assert anchor_k == pytest.approx(0.5 * (298.15 + 0.4 * 79 + 298.15))
 
 

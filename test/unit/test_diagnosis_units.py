@@ -10,23 +10,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.diagnosis import extensions_impl as ext
 from battery_predictor.diagnosis.candidates import CANDIDATES, CapacityFade, CellImbalance, ResistanceGrowth, candidate
-from battery_predictor.diagnosis.diagnose import (
-    SIMPLICITY_ORDER,
-    CandidateResult,
-    choose_best,
-    claim_allowed,
-    excess_mv,
-)
+from battery_predictor.diagnosis.decision import SIMPLICITY_ORDER, choose_best, claim_allowed, excess_mv
 from battery_predictor.diagnosis.engine import Engine, Post, ends_at_cutoff, observe
 from battery_predictor.diagnosis.lsq import ParallelEvaluator, budgeted_least_squares
 from battery_predictor.diagnosis.residuals import correlation_ratio, direction_of_recent_current
+from battery_predictor.diagnosis.results import CandidateResult
 from battery_predictor.diagnosis.scoring import held_out_score, noise_level_v
-from battery_predictor.extensions import EXTENSION_NAMES
-from battery_predictor.params import load_params
+from battery_predictor.params import EXTENSION_NAMES, load_params
 from battery_predictor.recording import Recording
 from battery_predictor.simulation import SimulationRequest, StepLoad
+from battery_predictor.simulation import extensions as ext
 from battery_predictor.simulation.fast import FastPackSimulator
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"

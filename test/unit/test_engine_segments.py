@@ -79,8 +79,8 @@ def test_refuses_an_soc_outside_the_model_and_an_uncovered_extension(ranger):
 
 
 def test_weak_group_matches_the_pybamm_pack_model(ranger, route_segments):
-    from battery_predictor.diagnosis.extensions_impl import weak_group_fraction
     from battery_predictor.prediction.cell_runner import PackRunner
+    from battery_predictor.simulation.extensions import weak_group_fraction
 
     params = ranger.with_values({"Weak series group capacity fraction": 0.8}, extensions=("cell_imbalance",))
     pack = EnginePack(params, weak_fraction=weak_group_fraction(params))
@@ -99,8 +99,8 @@ def test_weak_group_matches_the_pybamm_pack_model(ranger, route_segments):
 
 
 def test_temperature_extension_matches_the_pybamm_pack_model_in_the_cold(ranger, route_segments):
-    from battery_predictor.diagnosis.extensions_impl import EA_SERIES, extension_value
     from battery_predictor.prediction.cell_runner import PackRunner
+    from battery_predictor.simulation.extensions import EA_SERIES, extension_value
 
     params = ranger.with_values({"Negative particle diffusivity activation energy [J.mol-1]": 30000.0,
                                  "Positive particle diffusivity activation energy [J.mol-1]": 25000.0,

@@ -20,18 +20,18 @@ from battery_predictor.lab.experiments import (
 )
 from battery_predictor.lab.instruments import InstrumentSpec, measure, quantise, sample_trace, window_average
 from battery_predictor.lab.real_pack import (
-    CURRENT_INPUT,
     SURFACE_32700_M2,
     PackTrace,
     RealPack,
     RealPackSpec,
     cell_spread,
-    input_name,
     real_pack_params,
 )
 from battery_predictor.params import load_params
 from battery_predictor.simulation import SimulationRequest, StepLoad
 from battery_predictor.simulation.fast import FastPackSimulator
+from battery_predictor.simulation.liionpack_sim import CURRENT_INPUT
+from battery_predictor.simulation.liionpack_sim import liionpack_input_name as input_name
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
 

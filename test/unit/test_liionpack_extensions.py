@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.diagnosis import extensions_impl as ext
 from battery_predictor.params import load_params
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
+from battery_predictor.simulation import extensions as ext
 from battery_predictor.simulation.liionpack_sim import interconnect_resistance_factor
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"

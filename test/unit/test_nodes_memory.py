@@ -5,7 +5,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from battery_predictor.nodes.memory import FASTDDS_PROFILE_XML, configure_process, resident_mb
+from battery_predictor.nodes.memory import FASTDDS_PROFILE_XML, configure_process
+from battery_predictor.processes import resident_mb
 
 
 def test_fast_dds_gets_the_dynamic_profile_unless_the_user_chose_one() -> None:

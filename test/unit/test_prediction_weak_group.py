@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.diagnosis import extensions_impl as ext
 from battery_predictor.params import load_params
 from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, calibrate_soc
 from battery_predictor.prediction.cell_runner import PackRunner
 from battery_predictor.prediction.runtime import predict_remaining_runtime
 from battery_predictor.simulation import SimulationRequest, StepLoad
+from battery_predictor.simulation import extensions as ext
 from battery_predictor.simulation.fast import FastPackSimulator
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"

@@ -59,7 +59,7 @@ def bag_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         "end_ns": end_ns,
         "start": _iso(start_ns) if start_ns is not None else None,
         "end": _iso(end_ns) if end_ns is not None else None,
-        "duration_s": (end_ns - start_ns) / 1e9 if start_ns is not None else 0.0,
+        "duration_s": (end_ns - start_ns) / 1e9 if start_ns is not None and end_ns is not None else 0.0,
         "metadata": decode_custom(custom),
         "style": None,
         "battery_topic": None,

@@ -21,7 +21,8 @@ from battery_predictor.errors import BagError, BatteryPredictorError
 from battery_predictor.io.bags.schema import KEY_SHA256, RESERVED_PREFIX, typestore
 
 
-def one_line(text: str) -> str:
+def one_line(text: object) -> str:
+    """``str(text)`` on one line (an exception's message, say), runs of white space made one space."""
     return " ".join(str(text).split())
 
 

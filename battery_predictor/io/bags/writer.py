@@ -280,6 +280,6 @@ def _write_relay(writer, ts, prefix, stamps, v, i, temp_k) -> None:
     for k, ns in enumerate(stamps.tolist()):
         writer.write(c_v, ns, ts.serialize_cdr(f64(data=float(v[k])), FLOAT64_TYPE))
         writer.write(c_i, ns, ts.serialize_cdr(f64(data=float(i[k])), FLOAT64_TYPE))
-        if c_t is not None and math.isfinite(temp_c[k]):
+        if c_t is not None and temp_c is not None and math.isfinite(temp_c[k]):
             msg = temp_cls(header=header_cls(stamp=_stamp(ts, ns), frame_id="battery"), temperature=float(temp_c[k]), variance=0.0)
             writer.write(c_t, ns, ts.serialize_cdr(msg, TEMPERATURE_TYPE))

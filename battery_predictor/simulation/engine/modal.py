@@ -150,7 +150,6 @@ def _boundary_states_numpy(lam: np.ndarray, drive: np.ndarray, z0: np.ndarray, d
         return surfaces, checkpoints, z[-1:].copy()
     z = z0.copy()
     last_h = np.nan
-    decay = phi_drive = None
     for k in range(n_steps):
         if k % stride == 0:
             checkpoints[:, k // stride] = z

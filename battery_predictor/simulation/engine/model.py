@@ -181,7 +181,7 @@ class LinearSpm:
     lower_cutoff_v: float
     thermal: LumpedThermal | None = None
 
-    def cell_voltage_v(self, surface_n: np.ndarray, surface_p: np.ndarray, current_a: np.ndarray,
+    def cell_voltage_v(self, surface_n: np.ndarray, surface_p: np.ndarray, current_a: np.ndarray | float,
                        temperature_k, eps_n=None, eps_p=None, height_m=None) -> np.ndarray:
         """Terminal voltage (V) of the cell at surface states and cell currents (A), elementwise.
 

@@ -405,6 +405,7 @@ def _run_thermal(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nda
             lam = sub.lam * factors(g[:, 0], g[:, 1])
             t_k = temps[inside, k]
             s_k = trace.surfaces[inside, k]
+            assert model.thermal is not None  # a thermal run
             # the root is found with the temperature's Euler line inside the step (the voltage moves by
             # about a millivolt per kelvin; the step's temperature change is a few hundredths of one)
             r_k = sub.heat_rate * model.thermal.temperature_rate_k_s(s_k[:, 0], s_k[:, 1], sub_i[k], t_k,
@@ -445,8 +446,11 @@ def _temperature_within(model: LinearSpm, batch: _Batch, s_k: np.ndarray, s_tau:
     """Cell temperature (K) ``tau`` into a step: Heun's step of length ``tau`` from ``(s_k, t_k)`` (surfaces
     (..., 2) at the step start and at ``tau``), the recurrence's own rule, so that it needs nothing past ``tau``
     (the step's end may lie past a cut-off where the cell emptied)."""
+    thermal = model.thermal
+    assert thermal is not None  # a thermal run
+
     def rate(s, t):
-        return batch.heat_rate * model.thermal.temperature_rate_k_s(s[..., 0], s[..., 1], current_a, t,
+        return batch.heat_rate * thermal.temperature_rate_k_s(s[..., 0], s[..., 1], current_a, t,
                                                                     batch.temperature_k, batch.eps_n, batch.eps_p,
                                                                     batch.height_m)
 
@@ -567,8 +571,10 @@ def _thermal_at_times(runs: CellRuns, modal: ModalSystem, time_s) -> tuple[np.nd
     surfaces = z @ modal.surface_weights.T
     batch = runs.extra["batch"]
     col = (slice(None), None)
-    per_set = _Batch(*(None if v is None else np.asarray(v)[col] for v in (
-        batch.lam, batch.drive, batch.eps_n, batch.eps_p, batch.height_m, batch.temperature_k, batch.heat_rate)))
+    per_set = _Batch(lam=np.asarray(batch.lam)[col], drive=np.asarray(batch.drive)[col],
+                     eps_n=np.asarray(batch.eps_n)[col], eps_p=np.asarray(batch.eps_p)[col],
+                     height_m=np.asarray(batch.height_m)[col], temperature_k=np.asarray(batch.temperature_k)[col],
+                     heat_rate=None if batch.heat_rate is None else np.asarray(batch.heat_rate)[col])
     temperature_k = _temperature_within(model_of(runs), per_set, trace.surfaces[:, k], surfaces,
                                         steps.current_a[k][None, :], trace.temperature_k[:, k], tau[None, :])
     return surfaces, temperature_k

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -237,7 +238,8 @@ class EnginePack:
         cell_a = (pack_a - self.current_offset_a) / self.params.parallel
         f_n, f_p = self._diffusivity_factors_at(float(temperature_k))
         sets = ParameterSets(height=self._heights, diffusivity_n=f_n, diffusivity_p=f_p)
-        common = dict(temperature_k=float(temperature_k), backend=self.backend, keep_states=True, sets=sets)
+        common: dict[str, Any] = dict(temperature_k=float(temperature_k), backend=self.backend, keep_states=True,
+                                      sets=sets)
         if self.model.thermal is not None:
             common["diffusivity_temperature"] = self._table_at(float(temperature_k))
             if isinstance(start, EngineState) and start.cell_temperature_k is not None:
@@ -247,7 +249,8 @@ class EnginePack:
             if self._heights.size > 1:
                 if start.weak_particles is None:
                     raise SimulationError("the state to continue from has no weak group (made without cell_imbalance?)")
-                particles = tuple(np.vstack([a, b]) for a, b in zip(start.particles, start.weak_particles))
+                weak = start.weak_particles
+                particles = (np.vstack([particles[0], weak[0]]), np.vstack([particles[1], weak[1]]))
             runs = run_cells(self.model, self.modal, duration_s, cell_a, initial_state=particles, **common)
             soc_start, charge0 = start.soc_start, start.charge_ah
         else:

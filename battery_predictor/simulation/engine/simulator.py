@@ -62,6 +62,7 @@ from battery_predictor.simulation.engine.thermal import (
     diffusivity_temperature,
     heat_capacity,
 )
+from battery_predictor.simulation.extensions import series_resistance_factor
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 LOG = logging.getLogger(__name__)
@@ -130,13 +131,11 @@ ENGINE_EXTENSIONS = CELL_MODEL_EXTENSIONS + ("temperature",)
 
 def _series_resistance_ohm(params, temperature_k) -> np.ndarray:
     """The pack's ``R_eq`` (Ohm) at cell temperatures ``temperature_k`` (K): the extension ``temperature``'s
-    Arrhenius factor (:func:`~battery_predictor.diagnosis.extensions_impl.series_resistance_factor`), else constant."""
+    Arrhenius factor (:func:`~battery_predictor.simulation.extensions.series_resistance_factor`), else constant."""
     p = params.interconnect
     r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"], p["r_t_ohm"])
     if "temperature" not in params.extensions:
         return np.asarray(r_eq, dtype=float)
-    from battery_predictor.diagnosis.extensions_impl import series_resistance_factor
-
     return r_eq * series_resistance_factor(params, temperature_k)
 
 
@@ -244,6 +243,7 @@ class EngineSimulator:
             if request.initial_soc is not None:
                 out[:, k] = window.concentrations(soc=float(request.initial_soc))
             else:
+                assert request.initial_pack_ocv_v is not None  # one of the two is given (checked by the caller)
                 out[:, k] = window.concentrations(ocv_v=float(request.initial_pack_ocv_v) / params.series)
         return out[0], out[1]
 
@@ -361,6 +361,7 @@ class EngineSimulator:
         window = StoichiometryWindow(model, pv)
         if request.initial_soc is not None:
             return window.concentrations(soc=float(request.initial_soc))
+        assert request.initial_pack_ocv_v is not None  # neither given was answered above
         return window.concentrations(ocv_v=float(request.initial_pack_ocv_v) / params.series)
 
     def _parameter_values(self, params):

@@ -92,6 +92,7 @@ class StoichiometryWindow:
                 raise SimulationError(f"initial SOC must be within 0..1, got {soc}")
             x = self.x_0 + soc * (self.x_100 - self.x_0)
         else:
+            assert ocv_v is not None  # exactly one of the two is given (checked above)
             x = self.x_at_ocv(float(ocv_v))
         y = float(self.y_of(x))
         if not (0.0 < x < 1.0 and 0.0 < y < 1.0):

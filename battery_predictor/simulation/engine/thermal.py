@@ -38,12 +38,12 @@ afterwards on every boundary; about 200x slower, the path for machines without N
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from battery_predictor.errors import SimulationError
+from battery_predictor.simulation.engine.kernel import forget_thermal_kernel, thermal_kernel
 from battery_predictor.simulation.engine.modal import step_coefficients
 
 LOG = logging.getLogger(__name__)
@@ -265,8 +265,6 @@ def thermal_recurrence(model, modal, lam: np.ndarray, drive: np.ndarray, z0: np.
                                                                                (z0.shape[0],))
     kernel = None
     if backend != "numpy":
-        from battery_predictor.simulation.engine.kernel import thermal_kernel
-
         kernel = thermal_kernel(model, parallel=z0.shape[0] >= 64)
         if kernel is None:
             if backend == "numba":
@@ -282,8 +280,6 @@ def thermal_recurrence(model, modal, lam: np.ndarray, drive: np.ndarray, z0: np.
         except NumbaError as exc:
             LOG.warning("engine: the thermal kernel does not compile for this model (%s); using NumPy",
                         str(exc).splitlines()[0])
-            from battery_predictor.simulation.engine.kernel import forget_thermal_kernel
-
             forget_thermal_kernel(model)
     return _recurrence_numpy(model, modal, lam, drive, z0, temperature0_k, ambient_k, eps_n, eps_p, height_m,
                              duration_s, current_a, table, stride, heat_rate)
@@ -353,124 +349,3 @@ def _recurrence_numba(kernel, modal, lam, drive, z0, temperature0_k, ambient_k, 
     voltages = (start_v, end_v) if has_voltage else None
     return ThermalTrace(surfaces=surfaces, temperature_k=temps, diffusivity_factor=factors, states=states,
                         stride=stride, z_end=z_end, backend="numba", voltages_v=voltages)
-
-
-def compile_thermal_kernel(numba, rate_source: str, voltage_source: str, parallel: bool):
-    """The compiled recurrence for a heat equation printed as ``cell_rate(y0, ..., y7)`` (see kernel.py).
-
-    With a ``voltage_source`` (``cell_voltage`` and ``cell_voltage_pair``, kernel.py) the kernel writes
-    the voltage at every step start and end; with an empty one it leaves them (``has_voltage`` False).
-    """
-    namespace: dict = {"math": math}
-    exec(compile(rate_source, "<pybamm heat equation>", "exec"), namespace)  # noqa: S102 - printed by PyBaMM
-    rate = numba.njit(fastmath=False)(namespace["cell_rate"])
-    has_voltage = bool(voltage_source)
-    if has_voltage:
-        exec(compile(voltage_source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - printed by PyBaMM
-        voltage = numba.njit(fastmath=False)(namespace["cell_voltage"])
-        voltage_pair = numba.njit(fastmath=False)(namespace["cell_voltage_pair"])
-    else:
-        @numba.njit(fastmath=False)
-        def voltage(y0, y1, y2, y3, y4, y5, y6):  # pragma: no cover - compiled, never called
-            return math.nan
-
-        @numba.njit(fastmath=False)
-        def voltage_pair(y0, y1, y2a, y2b, y3, y4, y5, y6):  # pragma: no cover - compiled, never called
-            return math.nan, math.nan
-
-    @numba.njit(parallel=parallel, fastmath=False)
-    def kernel(lam, drive, z0, temperature0_k, ambient_k, eps_n, eps_p, height_m, heat_rate, duration_s, current_a,
-               weights,
-               n_neg, inv0, dinv, ln_factor, constant, stride, surfaces, temps, factors, states,
-               z_end, start_v, end_v, cutoff_v):  # pragma: no cover - compiled
-        n_sets, n_modes = z0.shape
-        n_steps = duration_s.shape[0]
-        n_grid = ln_factor.shape[1]
-        for s in numba.prange(n_sets):
-            z = z0[s].copy()
-            decay = np.empty(n_modes)
-            phid = np.empty(n_modes)
-            t = temperature0_k[s]
-            t_amb, en, ep, hh, f_rate = ambient_k[s], eps_n[s], eps_p[s], height_m[s], heat_rate[s]
-            sn = 0.0
-            sp = 0.0
-            for j in range(n_modes):
-                sn += weights[0, j] * z[j]
-                sp += weights[1, j] * z[j]
-            surfaces[s, 0, 0] = sn
-            surfaces[s, 0, 1] = sp
-            temps[s, 0] = t
-            for j in range(n_modes):
-                states[s, 0, j] = z[j]
-            last_h = -1.0
-            if has_voltage and n_steps > 0:
-                start_v[s, 0] = voltage(sn, sp, current_a[0], t, en, ep, hh)
-            # a voltage below the cut-off ends the set: what follows is NaN (first start voltage, end
-            # voltage and boundary that are past the end; n_steps / n_steps + 1 when it runs to the end)
-            nan_start, nan_end, nan_boundary = n_steps, n_steps, n_steps + 1
-            for k in range(n_steps):
-                h = duration_s[k]
-                i = current_a[k]
-                if has_voltage and not start_v[s, k] >= cutoff_v:
-                    nan_start, nan_end, nan_boundary = k + 1, k, k + 1
-                    break
-                r0 = f_rate * rate(sn, sp, i, t, en, ep, hh, t_amb)
-                g_n = 1.0
-                g_p = 1.0
-                if not constant:
-                    x = (1.0 / (t + 0.5 * h * r0) - inv0) / dinv
-                    jj = int(math.floor(x))
-                    if jj < 0:
-                        jj = 0
-                    if jj > n_grid - 2:
-                        jj = n_grid - 2
-                    frac = x - jj
-                    g_n = math.exp(ln_factor[0, jj] * (1.0 - frac) + ln_factor[0, jj + 1] * frac)
-                    g_p = math.exp(ln_factor[1, jj] * (1.0 - frac) + ln_factor[1, jj + 1] * frac)
-                factors[s, k, 0] = g_n
-                factors[s, k, 1] = g_p
-                if (not constant) or h != last_h:
-                    for j in range(n_modes):
-                        lj = lam[s, j] * (g_n if j < n_neg else g_p)
-                        if lj == 0.0:
-                            decay[j] = 1.0
-                            phid[j] = h * drive[s, j]
-                        else:
-                            x = lj * h
-                            decay[j] = math.exp(x)
-                            phid[j] = math.expm1(x) / lj * drive[s, j]
-                    last_h = h
-                sn = 0.0
-                sp = 0.0
-                for j in range(n_modes):
-                    z[j] = decay[j] * z[j] + phid[j] * i
-                    sn += weights[0, j] * z[j]
-                    sp += weights[1, j] * z[j]
-                r1 = f_rate * rate(sn, sp, i, t + h * r0, en, ep, hh, t_amb)
-                t = t + 0.5 * h * (r0 + r1)
-                if has_voltage:  # the step's end and the next step's start share the state
-                    if k + 1 < n_steps:
-                        end_v[s, k], start_v[s, k + 1] = voltage_pair(sn, sp, i, current_a[k + 1], t, en, ep, hh)
-                    else:
-                        end_v[s, k] = voltage(sn, sp, i, t, en, ep, hh)
-                surfaces[s, k + 1, 0] = sn
-                surfaces[s, k + 1, 1] = sp
-                temps[s, k + 1] = t
-                if (k + 1) % stride == 0:
-                    for j in range(n_modes):
-                        states[s, (k + 1) // stride, j] = z[j]
-                if has_voltage and not end_v[s, k] >= cutoff_v:
-                    nan_start, nan_end, nan_boundary = k + 1, k + 1, k + 2
-                    break
-            for kk in range(nan_start, n_steps):
-                start_v[s, kk] = math.nan
-            for kk in range(nan_end, n_steps):
-                end_v[s, kk] = math.nan
-            for kk in range(nan_boundary, n_steps + 1):
-                surfaces[s, kk, 0] = math.nan
-                surfaces[s, kk, 1] = math.nan
-                temps[s, kk] = math.nan
-            for j in range(n_modes):
-                z_end[s, j] = z[j]
-
-    return kernel, has_voltage

@@ -3,7 +3,7 @@
 The default run checks the generator itself (truths far from the shipped params, working days with
 and without a charging stop, both robots, seeded and reproducible) in a few seconds. The sweep that
 runs ``battery-predictor diagnose`` on every effect of the catalogue for both robots is solver-heavy
-(1-4 min a case on 2 cores) and opt-in: ``BP_DIAG2_SEEDS=0,1,2 pytest test/unit/test_diagnosis_generator2.py``
+(1-4 min a case on 2 cores) and opt-in: ``BP_DIAG2_SEEDS=0,1,2 pytest test/integration/test_diagnosis_generator2.py``
 (or ``benchmarks/diagnosis_generator2.py``, which prints the table and the share named right). Each
 case must name the hidden effect (``none``: nothing claimed) and never claim a cause on ``none``.
 """

@@ -1,6 +1,8 @@
-"""What each model extension (see :mod:`battery_predictor.extensions`) changes in the PyBaMM model.
+"""Model extensions: what each one a params file may activate changes in the PyBaMM model.
 
-A params file activates extensions with ``extensions: [name, ...]``; their values live in
+A params file activates extensions with ``extensions: [name, ...]`` (the names are
+:data:`~battery_predictor.params.EXTENSION_NAMES`; ``battery-predictor diagnose`` names the one
+that fixes a model error and writes it with ``--write-params``); their values live in
 ``cell.extra`` (PyBaMM ``"Name [unit]"`` keys, or our own keys with a unit where PyBaMM has
 no parameter). Every simulator and the predictor's :class:`~battery_predictor.prediction.cell_runner.PackRunner`
 build their model through :func:`battery_predictor.simulation.cell_setup.build_model` and their
@@ -57,6 +59,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from battery_predictor.params import PackParams
+from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
+from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 #: Gas constant in J/(mol K).
 R_GAS = 8.314462618
@@ -92,7 +102,7 @@ COLD_WINDOW = "Stoichiometry window loss per kelvin below 298.15 K [K-1]"
 COLD_REFERENCE_K = 298.15
 #: Temperature (K) at which the identified model holds, where the window and the Arrhenius cell resistance of
 #: the extension ``temperature`` change nothing: the diagnosis sets it from the reference recordings
-#: (:func:`reference_anchor_k`); :data:`COLD_REFERENCE_K` when absent.
+#: (:func:`~battery_predictor.diagnosis.reference.reference_anchor_k`); :data:`COLD_REFERENCE_K` when absent.
 ANCHOR_TEMPERATURE = "Temperature extension anchor temperature [K]"
 HEAT_TRANSFER = "Total heat transfer coefficient [W.m-2.K-1]"
 CONTACT_RESISTANCE = "Contact resistance [Ohm]"
@@ -114,7 +124,7 @@ PYBAMM_HYS_DECAY_KEYS = ("Positive particle lithiation hysteresis decay rate",
                          "Positive particle delithiation hysteresis decay rate")
 PYBAMM_HYS_INITIAL_KEY = "Initial hysteresis state in positive electrode"
 
-_OPTIONS = {
+_OPTIONS: dict[str, dict[str, Any]] = {
     "resistance_growth": {"contact resistance": "true"},
     "hysteresis": {"open-circuit potential": ("single", "Axen")},
 }
@@ -154,7 +164,7 @@ THERMAL_DEFAULTS = {
 _CYLINDER_ASPECT = 3.0
 
 
-def extension_model_options(params) -> dict:
+def extension_model_options(params: PackParams) -> dict[str, Any]:
     """PyBaMM model options implied by the params' active extensions."""
     opts: dict = {}
     for ext in params.extensions:
@@ -164,24 +174,18 @@ def extension_model_options(params) -> dict:
     return opts
 
 
-def series_resistance_factor(params, temperature_k):
+def series_resistance_factor(params: PackParams, temperature_k: ArrayLike) -> np.ndarray:
     """Arrhenius factor of the pack's series resistance ``R_eq`` at ``temperature_k`` (1 without the extension).
 
     The extension ``temperature`` makes the series resistance the reference fit found (interconnect
     plus the cell's ohmic part the SPM lacks) follow ``exp(E/R (1/T - 1/T_ref))``, T_ref = 298.15 K, and
     adds the Arrhenius cell resistance's excess over the anchor temperature (:data:`ANCHOR_TEMPERATURE`).
     """
-    import numpy as np
-
-    from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
-
     if "temperature" not in params.extensions:
         return np.ones_like(np.asarray(temperature_k, dtype=float))
     factor = arrhenius_factor(temperature_k, extension_value(params, EA_SERIES))
     r_cold = extension_value(params, COLD_RESISTANCE)
     if r_cold:  # the cells' Arrhenius excess, carried by the pack's series resistance
-        from battery_predictor.simulation.network import equivalent_network_resistance_ohm
-
         ic = params.interconnect
         r_eq = equivalent_network_resistance_ohm(params.series, params.parallel, ic["r_b_ohm"], ic["r_c_ohm"],
                                                  ic["r_t_ohm"])
@@ -191,7 +195,7 @@ def series_resistance_factor(params, temperature_k):
     return factor
 
 
-def cold_resistance_excess_ohm(r_ref_ohm: float, temperature_k, anchor_k: float = COLD_REFERENCE_K):
+def cold_resistance_excess_ohm(r_ref_ohm: float, temperature_k: ArrayLike, anchor_k: float = COLD_REFERENCE_K) -> np.ndarray:
     """Excess of the Arrhenius cell resistance over its value at the anchor temperature (Ohm per cell).
 
     Parameters
@@ -210,49 +214,17 @@ def cold_resistance_excess_ohm(r_ref_ohm: float, temperature_k, anchor_k: float 
     numpy.ndarray
         ``R (exp(E/R (1/T - 1/T_anchor)) - 1)`` in Ohm per cell.
     """
-    from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
-
     return r_ref_ohm * (arrhenius_factor(temperature_k, COLD_RESISTANCE_ACTIVATION_J_MOL, float(anchor_k)) - 1.0)
 
 
-def reference_anchor_k(temperature_traces_k, currents_a) -> float:
-    """The anchor temperature of the extension ``temperature`` from the reference recordings (K).
-
-    The identified model's accessible capacity is set where each reference discharge ended, at the
-    temperature the cell had then (a 2C reference self-heats by 30 K before its knee): the anchor is
-    the mean, over the reference recordings, of the measured temperature at each one's last
-    discharging sample (current above 1 % of its largest discharge current).
-
-    Parameters
-    ----------
-    temperature_traces_k : sequence of numpy.ndarray
-        Each reference recording's measured temperature (K).
-    currents_a : sequence of numpy.ndarray
-        Each reference recording's current (A, discharge positive).
-
-    Returns
-    -------
-    float
-        The anchor temperature in K.
-    """
-    import numpy as np
-
-    ends = []
-    for temp, cur in zip(temperature_traces_k, currents_a):
-        cur = np.asarray(cur, dtype=float)
-        dis = np.nonzero(cur > 0.01 * max(float(np.max(cur)), 0.0))[0]
-        ends.append(float(np.asarray(temp, dtype=float)[dis[-1] if dis.size else -1]))
-    return float(np.mean(ends))
-
-
-def extension_model_type(params) -> str:
+def extension_model_type(params: PackParams) -> str:
     """Model class name for ``params``: SPMe when ``electrolyte_transport`` is active on an SPM."""
     if "electrolyte_transport" in params.extensions and params.model == "SPM":
         return "SPMe"
     return params.model
 
 
-def extension_value(params, key: str) -> float:
+def extension_value(params: PackParams, key: str) -> float:
     """Value of an extension key: ``cell.extra`` / fitted / manual, else the extension default."""
     vals = params.cell_values
     if key in vals:
@@ -263,7 +235,7 @@ def extension_value(params, key: str) -> float:
     raise KeyError(key)
 
 
-def current_offset_a(params) -> float:
+def current_offset_a(params: PackParams) -> float:
     """Current sensor offset in A (pack level) when ``current_offset`` is active, else 0.
 
     The model is driven by ``measured current - offset``.
@@ -273,14 +245,14 @@ def current_offset_a(params) -> float:
     return extension_value(params, CURRENT_OFFSET)
 
 
-def weak_group_fraction(params) -> float:
+def weak_group_fraction(params: PackParams) -> float:
     """Capacity fraction of the weak series group when ``cell_imbalance`` is active, else 1."""
     if "cell_imbalance" not in params.extensions or params.series < 2:
         return 1.0
     return extension_value(params, WEAK_FRACTION)
 
 
-def imbalance_cell_inputs(params) -> dict | None:
+def imbalance_cell_inputs(params: PackParams) -> dict[str, np.ndarray] | None:
     """Per-cell ``Electrode height [m]`` for liionpack: series position 0 of every string is weak.
 
     liionpack numbers cells string by string (``parallel-strings`` netlist), so cell
@@ -288,8 +260,6 @@ def imbalance_cell_inputs(params) -> dict | None:
     at the same position, the strings stay identical and the pack equals the two-group
     model of the fast paths. None when ``cell_imbalance`` is not active.
     """
-    import numpy as np
-
     frac = weak_group_fraction(params)
     if frac == 1.0:
         return None
@@ -299,7 +269,7 @@ def imbalance_cell_inputs(params) -> dict | None:
     return {"Electrode height [m]": heights}
 
 
-def weak_group_params(params):
+def weak_group_params(params: PackParams) -> PackParams:
     """The params of one cell of the weak group (electrode height scaled), extensions kept otherwise.
 
     The group's cells sit in parallel with identical per-area properties, so they share the current
@@ -313,21 +283,19 @@ def weak_group_params(params):
     return replace(params, extra=extra)
 
 
-def _cooling_area_m2(volume_m3: float) -> float:
+def cooling_area_m2(volume_m3: float) -> float:
     """Surface of a cylinder of ``volume_m3`` with height = :data:`_CYLINDER_ASPECT` x diameter."""
     d = (4.0 * volume_m3 / (math.pi * _CYLINDER_ASPECT)) ** (1.0 / 3.0)
     return math.pi * d * (_CYLINDER_ASPECT * d) + 2.0 * math.pi * (d / 2.0) ** 2
 
 
-def lithiation_weight(sto):
+def lithiation_weight(sto: Any) -> Any:
     """0 below :data:`LITHIATION_ONSET`, rising quadratically to 1 at full lithiation (numbers or PyBaMM symbols)."""
     import pybamm
 
     x = (sto - LITHIATION_ONSET) / (1.0 - LITHIATION_ONSET)
     if isinstance(x, pybamm.Symbol):
         return pybamm.maximum(x, 0.0) ** 2
-    import numpy as np
-
     return np.maximum(x, 0.0) ** 2
 
 
@@ -354,7 +322,7 @@ def _arrhenius_exchange_current(j0, t_ref: float):
     return exchange_current
 
 
-def cold_window_scale(loss_per_k, temperature_k, anchor_k=COLD_REFERENCE_K):
+def cold_window_scale(loss_per_k: Any, temperature_k: Any, anchor_k: Any = COLD_REFERENCE_K) -> Any:
     """How much faster the electrodes' stoichiometries advance in the cold: ``1 / (1 - loss (T_anchor - T))`` (-).
 
     With the window loss of :data:`COLD_WINDOW` each electrode's open-circuit potential is evaluated at
@@ -369,8 +337,6 @@ def cold_window_scale(loss_per_k, temperature_k, anchor_k=COLD_REFERENCE_K):
     if any(isinstance(x, pybamm.Symbol) for x in (loss_per_k, temperature_k, anchor_k)):
         below = anchor_k - temperature_k
         return 1.0 / pybamm.maximum(1.0 - loss_per_k * below, 0.2)
-    import numpy as np
-
     below = float(anchor_k) - np.asarray(temperature_k, dtype=float)
     return 1.0 / np.maximum(1.0 - float(loss_per_k) * below, 0.2)
 
@@ -418,7 +384,7 @@ def _shifted_ocp(ocp, sign: float):
     return shifted
 
 
-def apply_extension_parameter_values(params, pv):
+def apply_extension_parameter_values(params: PackParams, pv: Any) -> Any:
     """Add what the active extensions need to PyBaMM parameter values ``pv`` (modified and returned).
 
     Called by :func:`~battery_predictor.simulation.cell_setup.prepared_parameter_values`; a no-op
@@ -435,7 +401,7 @@ def apply_extension_parameter_values(params, pv):
     if "temperature" in exts:
         missing = {k: v for k, v in THERMAL_DEFAULTS.items() if k not in keys}
         if "Cell cooling surface area [m2]" not in keys:
-            missing["Cell cooling surface area [m2]"] = _cooling_area_m2(float(pv["Cell volume [m3]"]))
+            missing["Cell cooling surface area [m2]"] = cooling_area_m2(float(pv["Cell volume [m3]"]))
         pv.update(missing, check_already_exists=False)
         t_ref = float(pv["Reference temperature [K]"]) if "Reference temperature [K]" in keys else 298.15
         for domain, ea_key in (("Negative", EA_NEG), ("Positive", EA_POS)):

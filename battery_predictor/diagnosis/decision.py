@@ -1,0 +1,118 @@
+"""The decision rule of the diagnosis: which candidate, if any, is named, and the thresholds it uses.
+
+Candidates are compared by their *excess* held-out error, the part of the RMSE
+above the voltage noise (:func:`excess_mv`), which no model can predict. Among the candidates
+whose excess error is within :data:`SEPARABILITY_FACTOR` (plus :data:`NEAR_NOISE_FRACTION` of
+the noise) of the lowest, the simplest (:data:`SIMPLICITY_ORDER`) is the best one. It is named
+when it cuts the baseline's held-out RMSE by at least :data:`GAIN_THRESHOLD_PCT` and by more
+than :data:`NOISE_FACTOR` times the voltage noise, and either the baseline's error is clearly
+above its floor (:data:`BASELINE_FLOOR_FACTOR`) or the extension brings the held-out error back
+to that floor with a gain of at least :data:`RESTORE_MIN_GAIN_PCT` (:func:`claim_allowed`);
+otherwise the cause is ``none``.
+
+The procedure that fits and scores the candidates is :mod:`battery_predictor.diagnosis.diagnose`;
+the evidence text that states the verdict is :func:`battery_predictor.diagnosis.residuals.evidence_text`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the result type only: results -> residuals -> decision must not come back here
+    from battery_predictor.diagnosis.results import CandidateResult
+
+#: A candidate must cut the baseline's held-out RMSE by at least this much (%) to be named.
+#: (Why each threshold has its value: docs/findings.md, "Code notes (issue 15)".)
+GAIN_THRESHOLD_PCT = 20.0
+#: ... and by more than this many times the voltage noise (absolute improvement) ...
+NOISE_FACTOR = 1.0
+#: ... and the baseline's held-out RMSE must exceed this many times its error floor: the larger of
+#: the voltage noise and the baseline's RMSE on the reference data (what the model achieves when
+#: nothing has changed). Below that, the residual left by the reference fit itself is what a
+#: candidate would explain.
+BASELINE_FLOOR_FACTOR = 4.0
+#: ... unless the extension *restores* the floor: its held-out RMSE at most this many times the floor
+#: (what the reference model achieved on the reference data, or the noise) while cutting the
+#: baseline's by at least :data:`RESTORE_MIN_GAIN_PCT`.
+RESTORE_FACTOR = 1.10
+RESTORE_MIN_GAIN_PCT = 30.0
+#: Candidates whose excess held-out error (above the noise) is within this factor of the lowest, plus
+#: :data:`NEAR_NOISE_FRACTION` of the noise, are not separable; the simplest of them is named.
+SEPARABILITY_FACTOR = 1.10
+#: Absolute slack of the separability margin, as a fraction of the voltage noise: near the noise
+#: floor the excess errors themselves are uncertain by about that much.
+NEAR_NOISE_FRACTION = 0.25
+#: From the smallest change of the model to the largest: one post-processed parameter (contact
+#: resistance, current offset), a second cell (imbalance), a model change (SPMe), a thermal model
+#: with two parameters, three degradation parameters, an extra state with three parameters.
+SIMPLICITY_ORDER = ("resistance_growth", "current_offset", "cell_imbalance", "electrolyte_transport",
+                    "temperature", "capacity_fade", "hysteresis")
+
+
+def excess_mv(rmse_mv: float, noise_mv: float) -> float:
+    """The part of a held-out RMSE above the voltage noise (mV): ``sqrt(max(rmse^2 - noise^2, 0))``.
+
+    White measurement noise adds in quadrature and no model can predict it, so two models are
+    compared by what they leave on top of it.
+    """
+    return math.sqrt(max(rmse_mv * rmse_mv - noise_mv * noise_mv, 0.0))
+
+
+def near_lowest(valid: Sequence[CandidateResult], noise_mv: float) -> list[CandidateResult]:
+    """The candidates not separable from the lowest held-out error (see :data:`SEPARABILITY_FACTOR`)."""
+    if not valid:
+        return []
+    lowest = min(excess_mv(r.heldout_rmse_mV, noise_mv) for r in valid)
+    margin = SEPARABILITY_FACTOR * lowest + NEAR_NOISE_FRACTION * noise_mv
+    return [r for r in valid if excess_mv(r.heldout_rmse_mV, noise_mv) <= margin]
+
+
+def choose_best(valid: Sequence[CandidateResult], noise_mv: float,
+                measured_first: Sequence[str] = ()) -> CandidateResult | None:
+    """The simplest candidate whose excess held-out error is within the margin of the lowest one.
+
+    Excess errors closer than :data:`SEPARABILITY_FACTOR` (plus :data:`NEAR_NOISE_FRACTION` of the
+    noise) do not tell two causes apart; the one that changes the model least
+    (:data:`SIMPLICITY_ORDER`) is named, e.g. a contact resistance before the SPMe, whose
+    electrolyte resistance also grows the ohmic drop. Causes in ``measured_first`` come first among
+    the inseparable ones: a cause the measurements show directly (a measured temperature unlike the
+    reference's, :data:`MEASURED_SHIFT_K`) is named before a hidden one that predicts as well.
+    """
+    near = near_lowest(valid, noise_mv)
+    if not near:
+        return None
+    return min(near, key=lambda r: (r.cause not in measured_first, SIMPLICITY_ORDER.index(r.cause),
+                                    r.heldout_rmse_mV))
+
+
+#: Observed recordings whose mean measured temperature differs from the references' by more than this
+#: (K) put ``temperature`` first among candidates that predict equally well (:func:`choose_best`). 5 K
+#: changes an Arrhenius rate with a typical battery activation energy (20-50 kJ/mol) by 15-40 %, far
+#: beyond the +-1 K of a chamber or of the self-heating difference between reference runs.
+MEASURED_SHIFT_K = 5.0
+
+
+def claim_allowed(base_rmse_mv: float, best_rmse_mv: float, noise_mv: float, floor_mv: float) -> bool:
+    """Whether a candidate with held-out RMSE ``best_rmse_mv`` may be named over the baseline (mV).
+
+    It must cut the baseline's error by :data:`GAIN_THRESHOLD_PCT`, and either the baseline is
+    clearly above its floor (:data:`BASELINE_FLOOR_FACTOR`) and the cut exceeds
+    :data:`NOISE_FACTOR` noise levels, or the baseline is above its floor and the candidate
+    restores the floor (both by :data:`RESTORE_FACTOR`) with a gain of at least
+    :data:`RESTORE_MIN_GAIN_PCT` (a cut smaller than the noise is then still a cut of the whole
+    error above the floor).
+    """
+    if not (math.isfinite(base_rmse_mv) and math.isfinite(best_rmse_mv)) or base_rmse_mv <= 0:
+        return False
+    gain_pct = 100.0 * (base_rmse_mv - best_rmse_mv) / base_rmse_mv
+    if gain_pct < GAIN_THRESHOLD_PCT:
+        return False
+    if base_rmse_mv > BASELINE_FLOOR_FACTOR * floor_mv and base_rmse_mv - best_rmse_mv > NOISE_FACTOR * noise_mv:
+        return True
+    # a baseline that already predicts within its floor (the reference fit's own error) shows no effect to
+    # restore: a knob that predicts below the floor there fits the observed day better than the reference
+    # model fits its own healthy data
+    return (base_rmse_mv > RESTORE_FACTOR * floor_mv and best_rmse_mv <= RESTORE_FACTOR * floor_mv
+            and gain_pct >= RESTORE_MIN_GAIN_PCT)
