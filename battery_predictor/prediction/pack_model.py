@@ -14,6 +14,14 @@ from __future__ import annotations
 from battery_predictor.errors import SimulationError
 from battery_predictor.params import PackParams
 from battery_predictor.prediction.cell_runner import PackRunner
+from battery_predictor.simulation.engine.segments import EnginePack
+from battery_predictor.simulation.extensions import (
+    EA_SERIES,
+    current_offset_a,
+    extension_value,
+    series_resistance_factor,
+    weak_group_fraction,
+)
 
 #: Values of ``PredictorConfig.simulator``.
 BACKENDS = ("auto", "engine", "pybamm")
@@ -69,15 +77,6 @@ def engine_pack(params: PackParams):
         ``hysteresis``, a diffusivity that depends on the stoichiometry such as the ``temperature``
         extension's extra activation energy at full lithiation).
     """
-    from battery_predictor.diagnosis.extensions_impl import (
-        EA_SERIES,
-        current_offset_a,
-        extension_value,
-        series_resistance_factor,
-        weak_group_fraction,
-    )
-    from battery_predictor.simulation.engine.segments import EnginePack
-
     temperature = "temperature" in params.extensions
     return EnginePack(params, current_offset_a=current_offset_a(params), weak_fraction=weak_group_fraction(params),
                       series_activation_j_mol=extension_value(params, EA_SERIES) if temperature else None,

@@ -56,7 +56,7 @@ def test_run_end_finds_the_same_cutoff(ranger):
 
 
 def test_run_end_with_a_weak_group_and_a_current_offset(ranger, route_segments):
-    from battery_predictor.diagnosis.extensions_impl import weak_group_fraction
+    from battery_predictor.simulation.extensions import weak_group_fraction
 
     params = ranger.with_values({"Weak series group capacity fraction": 0.8}, extensions=("cell_imbalance",))
     pack = EnginePack(params, weak_fraction=weak_group_fraction(params), current_offset_a=0.3)
@@ -66,7 +66,7 @@ def test_run_end_with_a_weak_group_and_a_current_offset(ranger, route_segments):
 
 
 def test_run_end_with_an_arrhenius_series_resistance(ranger, route_segments):
-    from battery_predictor.diagnosis.extensions_impl import EA_SERIES, extension_value
+    from battery_predictor.simulation.extensions import EA_SERIES, extension_value
 
     params = ranger.with_values({"Negative particle diffusivity activation energy [J.mol-1]": 30000.0,
                                  "Positive particle diffusivity activation energy [J.mol-1]": 25000.0,

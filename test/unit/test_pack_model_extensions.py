@@ -14,7 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.diagnosis.extensions_impl import (
+from battery_predictor.errors import SimulationError
+from battery_predictor.params import load_params
+from battery_predictor.prediction.cell_runner import PackRunner
+from battery_predictor.prediction.pack_model import FALLBACK_PREFIX, pack_model
+from battery_predictor.simulation.engine.segments import EnginePack
+from battery_predictor.simulation.extensions import (
     ANCHOR_TEMPERATURE,
     COLD_RESISTANCE,
     COLD_WINDOW,
@@ -28,11 +33,6 @@ from battery_predictor.diagnosis.extensions_impl import (
     HYS_HALF_WIDTH,
     WEAK_FRACTION,
 )
-from battery_predictor.errors import SimulationError
-from battery_predictor.params import load_params
-from battery_predictor.prediction.cell_runner import PackRunner
-from battery_predictor.prediction.pack_model import FALLBACK_PREFIX, pack_model
-from battery_predictor.simulation.engine.segments import EnginePack
 
 REPO = Path(__file__).resolve().parents[2]
 #: PackRunner steps PyBaMM at rtol 1e-6 / atol 1e-8; the engine is exact for the same discretised model.

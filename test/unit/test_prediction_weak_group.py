@@ -103,8 +103,8 @@ def test_calibrations_keep_the_weak_group_and_predict_the_simulated_runtime(weak
 
 
 def test_the_core_runs_covered_extensions_on_the_engine_and_says_when_it_cannot(weak_params):
-    from battery_predictor.diagnosis.extensions_impl import EA_POS_FULL
     from battery_predictor.prediction.core import PredictorConfig, PredictorCore
+    from battery_predictor.simulation.extensions import EA_POS_FULL
 
     weak = PredictorCore(PredictorConfig(params_file=str(weak_params.source)), params=weak_params)
     assert weak.model_backend.startswith("engine") and "cell_imbalance" in weak.model_backend

@@ -145,7 +145,7 @@ class EnginePack:
     resistance_factor : callable, optional
         ``resistance_factor(cell_temperature_k) -> factor`` on ``R_eq`` (float or array in, same
         shape out), e.g. the ``temperature`` extension's Arrhenius factor with its cold cell
-        resistance (``diagnosis.extensions_impl.series_resistance_factor``); default: the Arrhenius
+        resistance (``simulation.extensions.series_resistance_factor``); default: the Arrhenius
         factor of ``series_activation_j_mol``.
     samples_per_segment : int
         Minimum samples inside each segment (its end always included).
@@ -281,13 +281,14 @@ class EnginePack:
         cell_a = (pack_a - self.current_offset_a) / self.params.parallel
         f_n, f_p = self._diffusivity_factors_at(float(temperature_k))
         sets = ParameterSets(height=self._heights, diffusivity_n=f_n, diffusivity_p=f_p)
-        common = dict(temperature_k=float(temperature_k), backend=self.backend, sets=sets)
+        common: dict[str, Any] = dict(temperature_k=float(temperature_k), backend=self.backend, sets=sets)
         if isinstance(start, EngineState):
             particles = start.particles
             if self._heights.size > 1:
                 if start.weak_particles is None:
                     raise SimulationError("the state to continue from has no weak group (made without cell_imbalance?)")
-                particles = tuple(np.vstack([a, b]) for a, b in zip(start.particles, start.weak_particles))
+                weak = start.weak_particles
+                particles = (np.vstack([particles[0], weak[0]]), np.vstack([particles[1], weak[1]]))
             runs = run_cells(self.model, self.modal, duration_s, cell_a, initial_state=particles, **common)
         else:
             c_n, c_p = self.concentrations(float(start))
