@@ -1,4 +1,4 @@
-"""Pack simulators: the fast path agrees with liionpack on the robots' dynamic profiles."""
+"""Pack simulators: the fast path and the engine agree with liionpack on the robots' dynamic profiles."""
 
 from __future__ import annotations
 
@@ -18,11 +18,11 @@ from battery_predictor.simulation.network import equivalent_network_resistance_o
 PARAMS = Path(__file__).resolve().parents[2] / "params"
 
 
-def _compare(params, load, **req_kwargs):
-    """Both simulators on the same 10 s-resampled load (liionpack steps at 10 s)."""
+def _compare(params, load, simulator: str = "fast", **req_kwargs):
+    """``simulator`` and liionpack on the same 10 s-resampled load (liionpack steps at 10 s)."""
     stepped = load.resample(10.0)
     req = SimulationRequest(load=stepped, **req_kwargs)
-    fast = get_simulator("fast").simulate(params, req)
+    fast = get_simulator(simulator).simulate(params, req)
     ref = get_simulator("liionpack").simulate(params, req)
     n = min(len(fast.time_s), len(ref.time_s))
     # the final sample sits on the cut-off knee, where one step of timing dominates the difference
@@ -48,6 +48,29 @@ def test_fast_path_matches_liionpack_on_ranger_longest_route():
     fast, ref, rms_v = _compare(params, load, initial_soc=0.5)
     assert rms_v <= 0.005
     assert fast.termination == ref.termination == "end_of_load"
+
+
+@pytest.mark.slow
+def test_engine_matches_liionpack_on_temi_usage_profile_to_cutoff():
+    """Issue 18: the engine within 5 mV RMS and 0.5 % of the time to cut-off of liionpack (identical cells)."""
+    params = load_params(PARAMS / "temi.yaml")
+    profile = generate_usage_profile(seed=3, max_duration_s=4 * 3600)
+    engine, ref, rms_v = _compare(params, StepLoad.from_profile(profile), "engine", initial_soc=0.12)
+    assert "engine_fallback" not in engine.extra
+    assert ref.termination == "cell_cutoff" and engine.termination == "cell_cutoff"
+    assert rms_v <= 0.005
+    assert abs(engine.end_time_s - ref.end_time_s) / ref.end_time_s <= 0.005
+
+
+@pytest.mark.slow
+def test_engine_matches_liionpack_on_ranger_longest_route():
+    params = load_params(PARAMS / "ranger_mini.yaml")
+    profile = route_profile(longest_route(60.0), seed=4)
+    engine, ref, rms_v = _compare(params, StepLoad.from_profile(profile.concatenate(profile)), "engine",
+                                  initial_soc=0.5)
+    assert "engine_fallback" not in engine.extra
+    assert rms_v <= 0.005
+    assert engine.termination == ref.termination == "end_of_load"
 
 
 def test_equivalent_resistance_of_uniform_strings_is_series_over_parallel():

@@ -114,8 +114,9 @@ def _evaluate_rows(evaluator, rows) -> np.ndarray:
     shape = np.broadcast_shapes(*(np.shape(row) for row in rows))
     size = int(np.prod(shape)) if shape else 1
     aux = np.empty((len(rows), size))
+    stacked = aux.reshape((len(rows), *shape))  # a view: assigning broadcasts each row into aux
     for k, row in enumerate(rows):
-        aux[k] = np.broadcast_to(np.asarray(row, dtype=float), shape).ravel()
+        stacked[k] = row
     out = np.empty(size)
     for first in range(0, size, _VOLTAGE_CHUNK):  # chunks keep the temporaries in cache
         cols = slice(first, min(first + _VOLTAGE_CHUNK, size))
