@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import warnings
 from collections.abc import Iterator
 from typing import Any
 
@@ -155,11 +156,34 @@ def with_thermal(params: PackParams, mode: str) -> PackParams:
     return replace(params, options=options)
 
 
+#: A measured open-circuit voltage at most this far (V per cell) outside the params' range (the OCV
+#: at 0 and 100 % SOC) starts the cell at that end of the range, with a warning; sensor offset and
+#: quantisation put a full pack's rest voltage a few mV above a model's 100 % OCV.
+OCV_CLAMP_TOLERANCE_V = 0.03
+
+
+def _clamped_ocv_v(pv: Any, ocv_v: float) -> float:
+    """``ocv_v`` moved into the params' OCV range when it lies within :data:`OCV_CLAMP_TOLERANCE_V` outside it."""
+    try:
+        v_min = float(pv["Open-circuit voltage at 0% SOC [V]"])
+        v_max = float(pv["Open-circuit voltage at 100% SOC [V]"])
+    except (KeyError, TypeError, ValueError):
+        return ocv_v
+    for edge, outside in ((v_max, ocv_v > v_max), (v_min, ocv_v < v_min)):
+        if outside and abs(ocv_v - edge) <= OCV_CLAMP_TOLERANCE_V:
+            warnings.warn(f"initial open-circuit voltage {ocv_v:.4f} V per cell lies {1e3 * abs(ocv_v - edge):.1f} mV "
+                          f"outside the params' range; starting at {edge:.4f} V "
+                          f"({'full' if edge == v_max else 'empty'})", UserWarning, stacklevel=3)
+            return edge
+    return ocv_v
+
+
 def initial_concentrations(params: PackParams, pv: Any, *, initial_soc: float | None,
                            initial_cell_ocv_v: float | None) -> tuple[float, float]:
     """Initial electrode concentrations (mol/m3) for an SOC or an open-circuit voltage.
 
-    Returns the params' own initial concentrations when both are None.
+    Returns the params' own initial concentrations when both are None. An open-circuit voltage
+    just outside the params' range (:data:`OCV_CLAMP_TOLERANCE_V`) starts at its end, with a warning.
     """
     import pybamm
 
@@ -170,7 +194,12 @@ def initial_concentrations(params: PackParams, pv: Any, *, initial_soc: float | 
                 float(pv["Initial concentration in positive electrode [mol.m-3]"]))
     if initial_soc is not None and not (0.0 <= initial_soc <= 1.0):
         raise SimulationError(f"initial SOC must be within 0..1, got {initial_soc}")
-    value = initial_soc if initial_soc is not None else f"{initial_cell_ocv_v} V"
+    value: float | str
+    if initial_soc is not None:
+        value = initial_soc
+    else:
+        assert initial_cell_ocv_v is not None
+        value = f"{_clamped_ocv_v(pv, float(initial_cell_ocv_v))} V"
     try:
         x, y = pybamm.lithium_ion.get_initial_stoichiometries(value, pv)
     except (ValueError, pybamm.SolverError, ZeroDivisionError) as exc:

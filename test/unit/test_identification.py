@@ -264,3 +264,17 @@ def test_an_unknown_optional_coordinate_is_a_params_error(panasonic):
     with pytest.raises(ParamsError, match="unknown fit coordinate"):
         default_space(panasonic, extra=("electrolyte_conductivity",))
 
+
+
+def test_a_rest_voltage_just_above_full_starts_full_with_a_warning_and_far_above_is_an_error():
+    from battery_predictor.simulation.cell_setup import OCV_CLAMP_TOLERANCE_V, initial_concentrations
+
+    ranger = load_params(REPO / "params" / "ranger_mini.yaml")
+    pv = ranger.parameter_values()
+    v_full = float(pv["Open-circuit voltage at 100% SOC [V]"])
+    full = initial_concentrations(ranger, pv, initial_soc=1.0, initial_cell_ocv_v=None)
+    with pytest.warns(UserWarning, match="outside the params' range; starting at"):
+        got = initial_concentrations(ranger, pv, initial_soc=None, initial_cell_ocv_v=v_full + 0.001)
+    assert got == pytest.approx(full, rel=1e-4)
+    with pytest.raises(SimulationError, match="outside the voltage limits"):
+        initial_concentrations(ranger, pv, initial_soc=None, initial_cell_ocv_v=v_full + 2 * OCV_CLAMP_TOLERANCE_V)
