@@ -229,8 +229,24 @@ class EnginePack:
         A cell below its cut-off as soon as the first segment's current flows gives a run of one NaN
         sample at 0 s with ``reached_cutoff`` set.
         """
+        duration_s, pack_a, cell_a, common = self._inputs(segments, temperature_k)
+        common["keep_states"] = True
+        if self.model.thermal is not None:
+            common["diffusivity_temperature"] = self._table_at(float(temperature_k))
+            if isinstance(start, EngineState) and start.cell_temperature_k is not None:
+                common["initial_temperature_k"] = np.broadcast_to(start.cell_temperature_k, self._heights.shape)
+        runs = self._run_cells(start, duration_s, cell_a, common)
+        if isinstance(start, EngineState):
+            soc_start, charge0 = start.soc_start, start.charge_ah
+        else:
+            soc_start, charge0 = float(start), 0.0
+        return self._samples(runs, duration_s, pack_a, cell_a, soc_start, charge0)
+
+    def _inputs(self, segments, temperature_k: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Checked segment durations (s), pack and cell currents (A) and the kernel's common arguments."""
         segs = np.asarray(segments, dtype=float).reshape(-1, 2)
-        duration_s, pack_a = segs[:, 0], segs[:, 1]
+        # contiguous columns: the compiled kernel has one specialisation for every caller (and the warm-up)
+        duration_s, pack_a = np.ascontiguousarray(segs[:, 0]), np.ascontiguousarray(segs[:, 1])
         if segs.size == 0 or not (np.all(duration_s > 0) and np.all(np.isfinite(segs))):
             raise SimulationError("segments must be finite (duration > 0 s, current) pairs")
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
@@ -238,12 +254,11 @@ class EnginePack:
         cell_a = (pack_a - self.current_offset_a) / self.params.parallel
         f_n, f_p = self._diffusivity_factors_at(float(temperature_k))
         sets = ParameterSets(height=self._heights, diffusivity_n=f_n, diffusivity_p=f_p)
-        common: dict[str, Any] = dict(temperature_k=float(temperature_k), backend=self.backend, keep_states=True,
-                                      sets=sets)
-        if self.model.thermal is not None:
-            common["diffusivity_temperature"] = self._table_at(float(temperature_k))
-            if isinstance(start, EngineState) and start.cell_temperature_k is not None:
-                common["initial_temperature_k"] = np.broadcast_to(start.cell_temperature_k, self._heights.shape)
+        return duration_s, pack_a, cell_a, dict(temperature_k=float(temperature_k), backend=self.backend, sets=sets)
+
+    def _run_cells(self, start: float | EngineState, duration_s: np.ndarray, cell_a: np.ndarray,
+                   common: dict[str, Any]):
+        """The kernel's run of every group from an SOC or a carried state (with its weak group)."""
         if isinstance(start, EngineState):
             particles = start.particles
             if self._heights.size > 1:
@@ -251,13 +266,9 @@ class EnginePack:
                     raise SimulationError("the state to continue from has no weak group (made without cell_imbalance?)")
                 weak = start.weak_particles
                 particles = (np.vstack([particles[0], weak[0]]), np.vstack([particles[1], weak[1]]))
-            runs = run_cells(self.model, self.modal, duration_s, cell_a, initial_state=particles, **common)
-            soc_start, charge0 = start.soc_start, start.charge_ah
-        else:
-            c_n, c_p = self.concentrations(float(start))
-            runs = run_cells(self.model, self.modal, duration_s, cell_a, c_n0_mol_m3=c_n, c_p0_mol_m3=c_p, **common)
-            soc_start, charge0 = float(start), 0.0
-        return self._samples(runs, duration_s, pack_a, cell_a, soc_start, charge0)
+            return run_cells(self.model, self.modal, duration_s, cell_a, initial_state=particles, **common)
+        c_n, c_p = self.concentrations(float(start))
+        return run_cells(self.model, self.modal, duration_s, cell_a, c_n0_mol_m3=c_n, c_p0_mol_m3=c_p, **common)
 
     def run_end(self, start: float | EngineState, segments, temperature_k: float) -> EngineRunEnd:
         """Only the end of :meth:`run`: its last pack voltage, whether and when it reached the cut-off.
@@ -271,28 +282,8 @@ class EnginePack:
             run = self.run(start, segments, temperature_k)
             return EngineRunEnd(math.nan if run.reached_cutoff else float(run.pack_voltage_v[-1]),
                                 bool(run.reached_cutoff), float(run.end_time_s))
-        segs = np.asarray(segments, dtype=float).reshape(-1, 2)
-        # contiguous columns: the compiled kernel has one specialisation for every caller (and the warm-up)
-        duration_s, pack_a = np.ascontiguousarray(segs[:, 0]), np.ascontiguousarray(segs[:, 1])
-        if segs.size == 0 or not (np.all(duration_s > 0) and np.all(np.isfinite(segs))):
-            raise SimulationError("segments must be finite (duration > 0 s, current) pairs")
-        if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
-            raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
-        cell_a = (pack_a - self.current_offset_a) / self.params.parallel
-        f_n, f_p = self._diffusivity_factors_at(float(temperature_k))
-        sets = ParameterSets(height=self._heights, diffusivity_n=f_n, diffusivity_p=f_p)
-        common: dict[str, Any] = dict(temperature_k=float(temperature_k), backend=self.backend, sets=sets)
-        if isinstance(start, EngineState):
-            particles = start.particles
-            if self._heights.size > 1:
-                if start.weak_particles is None:
-                    raise SimulationError("the state to continue from has no weak group (made without cell_imbalance?)")
-                weak = start.weak_particles
-                particles = (np.vstack([particles[0], weak[0]]), np.vstack([particles[1], weak[1]]))
-            runs = run_cells(self.model, self.modal, duration_s, cell_a, initial_state=particles, **common)
-        else:
-            c_n, c_p = self.concentrations(float(start))
-            runs = run_cells(self.model, self.modal, duration_s, cell_a, c_n0_mol_m3=c_n, c_p0_mol_m3=c_p, **common)
+        duration_s, pack_a, cell_a, common = self._inputs(segments, temperature_k)
+        runs = self._run_cells(start, duration_s, cell_a, common)
         first = int(np.argmin(runs.end_time_s))  # the group that reaches its cut-off first ends the pack's run
         end_s = float(runs.end_time_s[first])
         if runs.reached_cutoff[first]:
