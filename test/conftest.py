@@ -45,3 +45,18 @@ def synthetic_temi(temi_params):
     """(truth values, truth params, training recording, held-out recording) made by liionpack."""
     truth = temi_params.with_values(SYNTHETIC_TRUTH)
     return dict(SYNTHETIC_TRUTH), truth, _synthesize(truth, 11), _synthesize(truth, 12)
+
+
+@pytest.fixture(scope="session")
+def ranger_params():
+    """The shipped Ranger Mini params."""
+    return load_params(REPO / "params" / "ranger_mini.yaml")
+
+
+@pytest.fixture(scope="session")
+def longest_route_segments():
+    """[(duration_s, pack current A), ...] of the longest route at 80 kg (mean currents), then 60 s standstill."""
+    from battery_predictor.profiles.ranger import longest_route, route_profile
+
+    profile = route_profile(longest_route(80.0), mode="mean")
+    return list(zip(profile.duration_s, profile.current_a)) + [(60.0, 1.70)]

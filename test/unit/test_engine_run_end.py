@@ -7,7 +7,6 @@ from pathlib import Path
 
 import pytest
 
-from battery_predictor.params import load_params
 from battery_predictor.simulation.engine.segments import EnginePack
 
 REPO = Path(__file__).resolve().parents[2]
@@ -15,19 +14,6 @@ REPO = Path(__file__).resolve().parents[2]
 SAME_V = 1e-9
 #: Cut-off times are located to 1e-7 s by both paths.
 SAME_S = 1e-6
-
-
-@pytest.fixture(scope="module")
-def ranger():
-    return load_params(REPO / "params" / "ranger_mini.yaml")
-
-
-@pytest.fixture(scope="module")
-def route_segments():
-    from battery_predictor.profiles.ranger import longest_route, route_profile
-
-    profile = route_profile(longest_route(80.0), mode="mean")
-    return list(zip(profile.duration_s, profile.current_a)) + [(60.0, 1.70)]
 
 
 def _same_end(pack: EnginePack, start, segments, temperature_k: float) -> None:
@@ -42,39 +28,39 @@ def _same_end(pack: EnginePack, start, segments, temperature_k: float) -> None:
 
 
 @pytest.mark.parametrize("temperature_k", [278.15, 297.15, 298.15])
-def test_run_end_equals_the_last_sample_of_a_run(ranger, route_segments, temperature_k):
-    pack = EnginePack(ranger)
-    _same_end(pack, 0.4, route_segments, temperature_k)
-    _same_end(pack, pack.run(0.6, [(300.0, 2.0)], temperature_k).final_state, route_segments, temperature_k)
+def test_run_end_equals_the_last_sample_of_a_run(ranger_params, longest_route_segments, temperature_k):
+    pack = EnginePack(ranger_params)
+    _same_end(pack, 0.4, longest_route_segments, temperature_k)
+    _same_end(pack, pack.run(0.6, [(300.0, 2.0)], temperature_k).final_state, longest_route_segments, temperature_k)
 
 
-def test_run_end_finds_the_same_cutoff(ranger):
-    pack = EnginePack(ranger)
+def test_run_end_finds_the_same_cutoff(ranger_params):
+    pack = EnginePack(ranger_params)
     _same_end(pack, 0.1, [(600.0, 20.0)] * 6, 298.15)
     below = pack.run(0.1, [(600.0, 20.0)] * 6, 298.15).final_state
     _same_end(pack, below, [(60.0, 30.0)], 298.15)  # below the cut-off as soon as the current flows
 
 
-def test_run_end_with_a_weak_group_and_a_current_offset(ranger, route_segments):
+def test_run_end_with_a_weak_group_and_a_current_offset(ranger_params, longest_route_segments):
     from battery_predictor.simulation.extensions import weak_group_fraction
 
-    params = ranger.with_values({"Weak series group capacity fraction": 0.8}, extensions=("cell_imbalance",))
+    params = ranger_params.with_values({"Weak series group capacity fraction": 0.8}, extensions=("cell_imbalance",))
     pack = EnginePack(params, weak_fraction=weak_group_fraction(params), current_offset_a=0.3)
-    _same_end(pack, 0.3, route_segments, 298.15)
-    _same_end(pack, pack.run(0.5, [(120.0, 5.0)], 298.15).final_state, route_segments, 290.0)
+    _same_end(pack, 0.3, longest_route_segments, 298.15)
+    _same_end(pack, pack.run(0.5, [(120.0, 5.0)], 298.15).final_state, longest_route_segments, 290.0)
     _same_end(pack, 0.12, [(600.0, 20.0)] * 4, 298.15)  # the weak group reaches the cut-off first
 
 
-def test_run_end_with_an_arrhenius_series_resistance(ranger, route_segments):
+def test_run_end_with_an_arrhenius_series_resistance(ranger_params, longest_route_segments):
     from battery_predictor.simulation.extensions import EA_SERIES, extension_value
 
-    params = ranger.with_values({"Negative particle diffusivity activation energy [J.mol-1]": 30000.0,
+    params = ranger_params.with_values({"Negative particle diffusivity activation energy [J.mol-1]": 30000.0,
                                  "Positive particle diffusivity activation energy [J.mol-1]": 25000.0,
                                  EA_SERIES: 20000.0}, extensions=("temperature",))
     pack = EnginePack(params, series_activation_j_mol=extension_value(params, EA_SERIES))
-    _same_end(pack, 0.3, route_segments, 278.15)
+    _same_end(pack, 0.3, longest_route_segments, 278.15)
 
 
-def test_run_end_of_thermal_cells_is_the_end_of_their_run(ranger, route_segments):
-    pack = EnginePack(replace(ranger, options={"thermal": "lumped"}))
-    _same_end(pack, 0.4, route_segments, 288.15)
+def test_run_end_of_thermal_cells_is_the_end_of_their_run(ranger_params, longest_route_segments):
+    pack = EnginePack(replace(ranger_params, options={"thermal": "lumped"}))
+    _same_end(pack, 0.4, longest_route_segments, 288.15)

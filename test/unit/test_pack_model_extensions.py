@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from battery_predictor.errors import SimulationError
-from battery_predictor.params import load_params
 from battery_predictor.prediction.cell_runner import PackRunner
 from battery_predictor.prediction.pack_model import FALLBACK_PREFIX, pack_model
 from battery_predictor.simulation.engine.segments import EnginePack
@@ -47,37 +46,24 @@ EXTENSIONS = ("current_offset", "resistance_growth", "cell_imbalance", "temperat
 
 
 @pytest.fixture(scope="module")
-def ranger():
-    return load_params(REPO / "params" / "ranger_mini.yaml")
+def covered(ranger_params):
+    return ranger_params.with_values(COVERED, extensions=EXTENSIONS)
 
 
-@pytest.fixture(scope="module")
-def route_segments():
-    from battery_predictor.profiles.ranger import longest_route, route_profile
-
-    profile = route_profile(longest_route(80.0), mode="mean")
-    return list(zip(profile.duration_s, profile.current_a)) + [(60.0, 1.70)]
-
-
-@pytest.fixture(scope="module")
-def covered(ranger):
-    return ranger.with_values(COVERED, extensions=EXTENSIONS)
-
-
-def test_every_covered_extension_runs_on_the_engine_within_the_stated_error(covered, route_segments):
+def test_every_covered_extension_runs_on_the_engine_within_the_stated_error(covered, longest_route_segments):
     engine, line = pack_model(covered)
     assert isinstance(engine, EnginePack)
     assert line.startswith("engine") and all(name in line for name in EXTENSIONS)
     runner = PackRunner(covered)
     plain = EnginePack(covered.with_values({}, extensions=()))
     for temperature_k in (263.15, 283.15, 310.0):
-        ours, theirs = engine.run(0.6, route_segments, temperature_k), runner.run(0.6, route_segments, temperature_k)
+        ours, theirs = engine.run(0.6, longest_route_segments, temperature_k), runner.run(0.6, longest_route_segments, temperature_k)
         assert ours.reached_cutoff == theirs.reached_cutoff
         np.testing.assert_allclose(ours.pack_voltage_v, theirs.pack_voltage_v, rtol=0, atol=SAME_AS_PYBAMM_V)
-        end = engine.run_end(0.6, route_segments, temperature_k)
+        end = engine.run_end(0.6, longest_route_segments, temperature_k)
         assert end.pack_voltage_v == pytest.approx(theirs.pack_voltage_v[-1], abs=SAME_AS_PYBAMM_V)
-    cold = engine.run(0.6, route_segments, 263.15).pack_voltage_v[-1]
-    assert cold < plain.run(0.6, route_segments, 263.15).pack_voltage_v[-1] - 0.05  # the extensions act
+    cold = engine.run(0.6, longest_route_segments, 263.15).pack_voltage_v[-1]
+    assert cold < plain.run(0.6, longest_route_segments, 263.15).pack_voltage_v[-1] - 0.05  # the extensions act
 
 
 def test_the_cut_off_in_the_cold_is_where_pybamm_finds_it(covered):
@@ -88,34 +74,34 @@ def test_the_cut_off_in_the_cold_is_where_pybamm_finds_it(covered):
     assert ours.end_time_s == pytest.approx(theirs.end_time_s, rel=2e-4)
 
 
-def test_thermal_cells_run_on_the_engine(ranger):
-    params = replace(ranger, options={"thermal": "lumped"})
+def test_thermal_cells_run_on_the_engine(ranger_params):
+    params = replace(ranger_params, options={"thermal": "lumped"})
     pack, line = pack_model(params)
     assert isinstance(pack, EnginePack) and line.startswith("engine")
 
 
-def test_a_stoichiometry_dependent_diffusivity_falls_back_visibly(ranger):
-    params = ranger.with_values({EA_POS_FULL: 20000.0}, extensions=("temperature",))
+def test_a_stoichiometry_dependent_diffusivity_falls_back_visibly(ranger_params):
+    params = ranger_params.with_values({EA_POS_FULL: 20000.0}, extensions=("temperature",))
     runner, line = pack_model(params)
     assert isinstance(runner, PackRunner)
     assert line.startswith(FALLBACK_PREFIX) and "depends on the stoichiometry" in line
     with pytest.raises(SimulationError, match="depends on the stoichiometry"):
         pack_model(params, "engine")
-    neutral = ranger.with_values({EA_POS_FULL: 0.0}, extensions=("temperature",))
+    neutral = ranger_params.with_values({EA_POS_FULL: 0.0}, extensions=("temperature",))
     assert isinstance(pack_model(neutral)[0], EnginePack)
 
 
 @pytest.mark.parametrize("values, extension", [({}, "electrolyte_transport"), ({HYS_HALF_WIDTH: 0.02}, "hysteresis")])
-def test_an_uncovered_extension_falls_back_visibly(ranger, values, extension):
-    runner, line = pack_model(ranger.with_values(values, extensions=(extension,)))
+def test_an_uncovered_extension_falls_back_visibly(ranger_params, values, extension):
+    runner, line = pack_model(ranger_params.with_values(values, extensions=(extension,)))
     assert isinstance(runner, PackRunner) and line.startswith(FALLBACK_PREFIX)
 
 
-def test_the_engine_simulator_hands_a_stoichiometry_dependent_diffusivity_on_visibly(ranger, caplog):
+def test_the_engine_simulator_hands_a_stoichiometry_dependent_diffusivity_on_visibly(ranger_params, caplog):
     from battery_predictor.simulation import SimulationRequest, StepLoad
     from battery_predictor.simulation.engine.simulator import EngineSimulator
 
-    params = ranger.with_values({EA_POS_FULL: 20000.0}, extensions=("temperature",))
+    params = ranger_params.with_values({EA_POS_FULL: 20000.0}, extensions=("temperature",))
     request = SimulationRequest(load=StepLoad.constant(10.0, 600.0), initial_soc=0.5, ambient_temperature_k=268.15)
     with caplog.at_level(logging.WARNING):
         result = EngineSimulator().simulate(params, request)
@@ -123,7 +109,7 @@ def test_the_engine_simulator_hands_a_stoichiometry_dependent_diffusivity_on_vis
     assert "depends on the stoichiometry" in caplog.text
 
 
-def test_simulate_json_reports_the_engine_time_and_a_fallback(ranger, tmp_path, capsys):
+def test_simulate_json_reports_the_engine_time_and_a_fallback(ranger_params, tmp_path, capsys):
     import json
 
     from battery_predictor.cli.main import main
@@ -131,7 +117,7 @@ def test_simulate_json_reports_the_engine_time_and_a_fallback(ranger, tmp_path, 
     csv = tmp_path / "load.csv"
     csv.write_text("time_s,voltage_V,current_A\n" + "".join(
         f"{t:.1f},{50.0 - 0.002 * t:.4f},10.0\n" for t in range(0, 1200, 10)))
-    cold = replace(ranger, operating={**ranger.operating, "ambient_temperature_k": 268.15}, extensions=("temperature",))
+    cold = replace(ranger_params, operating={**ranger_params.operating, "ambient_temperature_k": 268.15}, extensions=("temperature",))
     covered = replace(cold, extra={COLD_WINDOW: 0.004}).to_yaml(tmp_path / "covered.yaml")
     uncovered = replace(cold, extra={EA_POS_FULL: 20000.0}).to_yaml(tmp_path / "uncovered.yaml")
     outs = {}

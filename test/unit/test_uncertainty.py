@@ -126,11 +126,6 @@ def test_route_spread_probability_and_voltage_at_risk():
     assert RouteSpread(0.0, {}).probability_above(0.1) == 1.0
 
 
-@pytest.fixture(scope="module")
-def ranger_params():
-    return load_params(PARAMS / "ranger_mini.yaml")
-
-
 def fed(params, voltage_v: float, risk: float = 0.1) -> PredictorCore:
     core = PredictorCore(PredictorConfig(params_file=str(params.source), decision_risk=risk), params=params)
     for k in range(40):
