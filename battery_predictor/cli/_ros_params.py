@@ -6,6 +6,7 @@ from pathlib import Path
 
 from battery_predictor.config import read_yaml_mapping
 from battery_predictor.errors import ParamsError
+from battery_predictor.params import PackParams
 
 #: Node names the params files configure.
 NODE_NAMES = ("battery_monitor", "predictor")
@@ -34,6 +35,16 @@ def check_node_params_file(path: str, *, pack: str | None = None) -> Path:
     check_nodes_against_pack(p, _node_parameters(data, "battery_monitor"), _node_parameters(data, "predictor"),
                              pack=pack)
     return p
+
+
+def node_pack_params(path: str, *, pack: str | None = None) -> PackParams | None:
+    """The pack params the predictor of a node params file loads (``pack`` when given), or None when unnamed."""
+    from battery_predictor.config import resolve_params_file
+    from battery_predictor.params import load_params
+
+    _, data = read_yaml_mapping(Path(path), not_mapping="expected a mapping of node names to ros__parameters")
+    name = pack or str(_node_parameters(data, "predictor").get("params_file", "") or "")
+    return load_params(Path(resolve_params_file(name))) if name else None
 
 
 def _node_parameters(data: dict, node: str) -> dict:

@@ -10,9 +10,12 @@ Starts ``battery_monitor`` and ``predictor`` (parameters from P.yaml, with
 :mod:`battery_predictor.nodes.replay_session`), and records the nodes' outputs
 (``pack_state``, ``remaining_runtime``, ``/diagnostics``) into a new rosbag2
 MCAP bag ``DIR/outputs`` that Foxglove (the ``.mcap`` file) and ``rosbags`` open.
-``DIR/remaining_runtime.png`` plots the predicted remaining runtime and, when
-the bag carries it (the bundled information-robot bags), the true one; the
-checkpoints at 30, 60, ..., 300 min are printed.
+``DIR/remaining_runtime.png`` plots the predicted remaining runtime and the true
+one: the lab's truth when the bag carries it (the bundled information-robot bags;
+checkpoints at 30, 60, ..., 300 min), otherwise the measured recording's own end
+of discharge at the cut-off the predictor published, when the recording ends
+there (checkpoints at 10, 20, ..., 90 % of the discharge; the same truth as
+``evaluate-runtime``). Checkpoint errors and MAE are printed.
 """
 
 from __future__ import annotations
@@ -20,7 +23,10 @@ from __future__ import annotations
 import math
 import shutil
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from battery_predictor.replay import RuntimeTruth
 
 
 def register(sub) -> None:
@@ -36,26 +42,33 @@ def register(sub) -> None:
     p.add_argument("--pack", default=None, metavar="PACK.yaml", help="fitted pack params; overrides predictor.params_file")
     p.add_argument("--runtime-period", type=float, default=None, metavar="S",
                    help="override predictor.runtime_period_s (bag seconds between runtime updates)")
+    p.add_argument("--shared-domain", action="store_true",
+                   help="run the nodes on the environment's ROS domain (ROS_DOMAIN_ID) so other tools can watch live; "
+                        "by default a replay runs on a private domain on this machine, so it neither publishes "
+                        "recorded battery states into a running robot's graph nor hears other publishers")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=run)
 
 
 def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path | None = None,
                overwrite: bool = False, pack: str | None = None, runtime_period_s: float | None = None,
-               context=None, quiet: bool = False) -> dict:
+               context=None, quiet: bool = False, shared_domain: bool = False) -> dict:
     """Replay ``bag`` (see the module docstring); returns a summary dict.
 
-    ``context``: an initialised rclpy context to use (default: init and shut down the global one).
+    ``context``: an initialised rclpy context to use (default: a private one on a random ROS domain,
+    discovery on this machine only; with ``shared_domain``, rclpy's global one on the environment's
+    domain), shut down after the replay unless given.
     """
-    from battery_predictor.cli._ros_params import check_node_params_file
+    from battery_predictor.cli._ros_params import check_node_params_file, node_pack_params
     from battery_predictor.cli.common import check_output_dir, progress_wanted, replay_progress
     from battery_predictor.errors import InputDataError
-    from battery_predictor.nodes.client import ros_context
+    from battery_predictor.nodes.client import isolated_context, ros_context
     from battery_predictor.nodes.replay_run import replay_into_nodes
     from battery_predictor.nodes.replay_session import default_output_dir
-    from battery_predictor.replay import error_summary, read_replay_stream, runtime_truth
+    from battery_predictor.replay import error_summary, read_replay_stream
 
     check_node_params_file(params, pack=pack)
+    pack_params = node_pack_params(params, pack=pack)
     if not (rate >= 0 and not math.isnan(rate)):
         raise InputDataError(f"--rate is {rate} (must be >= 0)")
     out = check_output_dir(out_dir or default_output_dir(bag), "--out")
@@ -74,18 +87,23 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     if runtime_period_s is not None:
         overrides["runtime_period_s"] = float(runtime_period_s)
     name = Path(stream.source).name
-    title = (f"{name}: predicted vs true remaining runtime" if runtime_truth(stream.metadata)
-             else f"{name}: predicted remaining runtime")
+    title = f"{name}: remaining runtime"
 
-    with ros_context(context) as context:
-        if not quiet:
-            print(f"replay: {stream.source}: {stream.style} topics {', '.join(stream.topics)}, "
-                  f"{len(stream.messages)} messages over {stream.duration_s / 60:.1f} min"
-                  + (f", at most {rate:g}x" if rate > 0 else ", as fast as possible"), flush=True)
-        result = replay_into_nodes(
-            stream, context=context, params_file=params, out_bag=bag_out, plot=png, plot_title=title, rate=rate,
-            bag_metadata={"replay_of": str(bag), "params": str(params), "rate": rate}, overrides=overrides,
-            progress=lambda end_ns: replay_progress(stream, end_ns, "replay", enabled=not quiet and progress_wanted()))
+    own = isolated_context() if context is None and not shared_domain else None
+    try:
+        with ros_context(context or own) as context:
+            if not quiet:
+                print(f"replay: {stream.source}: {stream.style} topics {', '.join(stream.topics)}, "
+                      f"{len(stream.messages)} messages over {stream.duration_s / 60:.1f} min"
+                      + (f", at most {rate:g}x" if rate > 0 else ", as fast as possible"), flush=True)
+            result = replay_into_nodes(
+                stream, context=context, params_file=params, out_bag=bag_out, plot=png, plot_title=title, rate=rate,
+                bag_metadata={"replay_of": str(bag), "params": str(params), "rate": rate}, overrides=overrides,
+                progress=lambda end_ns: replay_progress(stream, end_ns, "replay", enabled=not quiet and progress_wanted()),
+                truth_from_points=lambda points: measured_truth(bag, stream, pack_params, points))
+    finally:
+        if own is not None:
+            own.try_shutdown()
     stats, points, truth, checkpoints = result.stats, result.points, result.truth, result.checkpoints
     summary = {
         "bag": stream.source,
@@ -101,12 +119,34 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
         "rejected_samples": result.rejected,
         "max_diagnostic_level": max(result.diagnostic_levels, default=0),
         "truth_runtime_min": truth.runtime_s / 60 if truth else None,
+        "truth_source": truth.source if truth else None,
         "checkpoints": [{"checkpoint_min": c.checkpoint_min, "prediction_time_min": c.time_s / 60,
                          "predicted_min": c.predicted_min, "true_min": c.true_min, "error_min": c.error_min}
                         for c in checkpoints],
         "errors": error_summary(checkpoints) if checkpoints else None,
     }
     return summary
+
+
+def measured_truth(bag: str, stream, pack_params, points) -> RuntimeTruth | None:
+    """The truth of a bag without one in its metadata: the measured discharge's end at the published cut-off.
+
+    None when the pack is unknown, no runtime message names a cut-off, the bag's battery samples
+    cannot be read, or the recording's end is not the cut-off.
+    """
+    from battery_predictor.errors import BatteryPredictorError
+    from battery_predictor.evaluation.runtime_eval import recording_runtime_truth
+    from battery_predictor.io.bags.reader import read_recording_bag
+
+    cutoffs = [p.cutoff_voltage_v for p in points if math.isfinite(p.cutoff_voltage_v) and p.cutoff_voltage_v > 0]
+    if pack_params is None or not cutoffs:
+        return None
+    try:
+        rec = read_recording_bag(bag, drop_nan=True)
+    except BatteryPredictorError:
+        return None
+    offset_s = stream.recording_time_s(stream.start_ns) - float(rec.time_s[0])
+    return recording_runtime_truth(pack_params, rec, cutoffs[-1], time_offset_s=offset_s)
 
 
 def print_summary(summary: dict) -> None:
@@ -117,10 +157,11 @@ def print_summary(summary: dict) -> None:
     if summary["rejected_samples"]:
         print(f"rejected samples: {summary['rejected_samples']}")
     if summary["checkpoints"]:
-        print(f"true runtime {summary['truth_runtime_min']:.1f} min")
+        source = summary.get("truth_source") or "metadata"
+        print(f"true runtime {summary['truth_runtime_min']:.1f} min ({'the lab truth in the bag' if source == 'metadata' else source})")
         print(f"  {'at min':>7} {'pred. at':>9} {'predicted':>10} {'true':>8} {'error':>8}   (min)")
         for c in summary["checkpoints"]:
-            print(f"  {c['checkpoint_min']:>7.0f} {c['prediction_time_min']:>9.1f} {c['predicted_min']:>10.1f} "
+            print(f"  {c['checkpoint_min']:>7.1f} {c['prediction_time_min']:>9.1f} {c['predicted_min']:>10.1f} "
                   f"{c['true_min']:>8.1f} {c['error_min']:>+8.1f}")
         e = summary["errors"]
         print(f"  MAE {e['mae_min']:.1f} min, max |error| {e['max_abs_error_min']:.1f} min, MAPE {e['mape_pct']:.1f} % "
@@ -132,7 +173,8 @@ def run(args) -> int:
     from battery_predictor.cli.common import print_json
 
     summary = replay_bag(args.bag, args.params, rate=args.rate, out_dir=args.out, overwrite=args.overwrite,
-                         pack=args.pack, runtime_period_s=args.runtime_period, quiet=args.json)
+                         pack=args.pack, runtime_period_s=args.runtime_period, quiet=args.json,
+                         shared_domain=args.shared_domain)
     if args.json:
         print_json(summary)
     else:

@@ -36,6 +36,7 @@ from battery_predictor.monitor.core import MonitorConfig, monitor_windows
 from battery_predictor.params import PackParams
 from battery_predictor.prediction.core import PredictorConfig, PredictorCore
 from battery_predictor.recording import Recording
+from battery_predictor.replay.truth import RuntimeTruth
 
 #: Default checkpoints: 10 %, 20 %, ..., 90 % of the discharge.
 DEFAULT_CHECKPOINTS = tuple(round(0.1 * k, 1) for k in range(1, 10))
@@ -205,6 +206,39 @@ def charge_to_end_ah(params: PackParams, rec: Recording, cutoff_v: float, end_ma
     win = Windows.of(rec)
     d = _discharge_of(params, win, cutoff_v, end_margin_v)
     return win.charge_ah(d.start_s, d.end_s) if d.known else math.nan
+
+
+def recording_runtime_truth(params: PackParams, rec: Recording, cutoff_v: float, *, time_offset_s: float = 0.0,
+                            checkpoints: Sequence[float] = DEFAULT_CHECKPOINTS) -> RuntimeTruth | None:
+    """The truth of a measured recording for a replay: its discharge's end (module docstring), or None.
+
+    Parameters
+    ----------
+    params : PackParams
+        The pack (series count and nominal capacity set the discharge's start and end margins).
+    rec : Recording
+        The measured recording.
+    cutoff_v : float
+        Pack voltage that ends the discharge, V.
+    time_offset_s : float
+        Added to the recording's times to put them on the replay's time axis, s.
+    checkpoints : sequence of float
+        Fractions of the discharge at which the replay compares (converted to minutes).
+
+    Returns
+    -------
+    RuntimeTruth or None
+        None when the recording's end is not known to be the cut-off (or it is no discharge).
+    """
+    try:
+        discharge = _discharge_of(params, Windows.of(rec), cutoff_v, None)
+    except InputDataError:
+        return None
+    if not discharge.known:
+        return None
+    start_s, end_s = discharge.start_s + time_offset_s, discharge.end_s + time_offset_s
+    marks = tuple((start_s + f * (end_s - start_s)) / 60.0 for f in checkpoints)
+    return RuntimeTruth(cutoff_v, end_s, source=f"recording: {discharge.ended_by}", checkpoints_min=marks)
 
 
 def _discharge_of(params: PackParams, win: Windows, cutoff_v: float, end_margin_v: float | None) -> Discharge:

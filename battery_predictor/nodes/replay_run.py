@@ -43,7 +43,7 @@ class ReplayResult:
     points : list of RuntimePoint
         Every ``/remaining_runtime`` message, on the recording's time axis (s).
     truth : RuntimeTruth or None
-        The bag's true runtime, when its metadata carries it.
+        The bag's true runtime, when its metadata carries it or ``truth_from_points`` finds it.
     checkpoints : list of Checkpoint
         Predicted vs true remaining runtime at the checkpoints (empty without truth).
     plot : pathlib.Path
@@ -81,7 +81,9 @@ def replay_into_nodes(stream: ReplayStream, *, context, params_file: str | Path,
                       bag_metadata: dict[str, Any], plot: Path, plot_title: str, rate: float,
                       overrides: dict[str, Any] | None = None, end_ns: int | None = None,
                       progress: Progress | None = None,
-                      while_open: Callable[[ReplaySession], Any] | None = None) -> ReplayResult:
+                      while_open: Callable[[ReplaySession], Any] | None = None,
+                      truth_from_points: Callable[[list[RuntimePoint]], RuntimeTruth | None] | None = None,
+                      ) -> ReplayResult:
     """Play ``stream`` into the nodes up to ``end_ns`` (ROS time, ns; None: the whole bag) and compare.
 
     Parameters
@@ -108,6 +110,9 @@ def replay_into_nodes(stream: ReplayStream, *, context, params_file: str | Path,
         ``progress(end_ns)``, see :data:`Progress`.
     while_open : callable, optional
         Called with the session after the play, before it closes (e.g. to call a service).
+    truth_from_points : callable, optional
+        The truth of a bag whose metadata has none (e.g. found in a measured recording at the
+        cut-off the predictor published), given the published runtime points.
     """
     output = OutputBag(out_bag, metadata=portable_paths(bag_metadata))
     try:
@@ -126,6 +131,8 @@ def replay_into_nodes(stream: ReplayStream, *, context, params_file: str | Path,
     finally:
         output.close()
     truth = runtime_truth(stream.metadata)
+    if truth is None and truth_from_points is not None:
+        truth = truth_from_points(points)
     checkpoints = compare_at_checkpoints(points, truth) if truth else []
     plot_runtime(points, truth, plot, title=plot_title, checkpoints=checkpoints)
     return ReplayResult(stats=stats, points=points, truth=truth, checkpoints=checkpoints, plot=Path(plot),

@@ -296,7 +296,7 @@ class ReplaySession:
             t_ns = round(stamp_to_s(msg.header.stamp) * 1e9)
             out.append(RuntimePoint(self.stream.recording_time_s(t_ns), float(msg.remaining_s), bool(msg.valid),
                                     int(msg.status), str(msg.reason), float(msg.remaining_p10_s),
-                                    float(msg.remaining_p90_s)))
+                                    float(msg.remaining_p90_s), float(msg.cutoff_voltage_v)))
         return out
 
     def pack_states(self) -> list:

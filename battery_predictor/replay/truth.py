@@ -15,10 +15,25 @@ DEFAULT_CHECKPOINTS_MIN = tuple(range(30, 301, 30))
 
 @dataclass(frozen=True)
 class RuntimeTruth:
-    """True runtime of a discharge bag: the time (recording axis, s) at which ``stop_voltage_v`` was measured."""
+    """True runtime of a discharge bag: the time (recording axis, s) at which ``stop_voltage_v`` was measured.
+
+    Attributes
+    ----------
+    stop_voltage_v : float
+        Pack voltage that ends the discharge, V.
+    runtime_s : float
+        Recording time of the end, s.
+    source : str
+        Where the truth comes from: ``"metadata"`` (the lab's, stored in the bag) or
+        ``"recording: <how the end is known>"`` (found in the measured samples).
+    checkpoints_min : tuple of float
+        Recording times (min) at which predictions are compared with the truth.
+    """
 
     stop_voltage_v: float
     runtime_s: float
+    source: str = "metadata"
+    checkpoints_min: tuple[float, ...] = DEFAULT_CHECKPOINTS_MIN
 
     def remaining_s(self, recording_time_s: float) -> float:
         """True remaining runtime (s) at a recording time."""
@@ -56,6 +71,8 @@ class RuntimePoint:
         The message's ``reason``.
     p10_s, p90_s : float
         The message's ``remaining_p10_s`` and ``remaining_p90_s``, s (NaN when unknown).
+    cutoff_voltage_v : float
+        The message's ``cutoff_voltage_v``, V (NaN when unknown).
     """
 
     time_s: float
@@ -65,6 +82,7 @@ class RuntimePoint:
     reason: str = ""
     p10_s: float = math.nan
     p90_s: float = math.nan
+    cutoff_voltage_v: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -85,13 +103,16 @@ class Checkpoint:
 
 
 def compare_at_checkpoints(points: Sequence[RuntimePoint], truth: RuntimeTruth,
-                           checkpoints_min: Sequence[float] = DEFAULT_CHECKPOINTS_MIN,
+                           checkpoints_min: Sequence[float] | None = None,
                            max_age_s: float = 600.0) -> list[Checkpoint]:
     """For each checkpoint (min from the recording start), the latest valid prediction at or before it.
 
-    Checkpoints after the true end of the discharge, or with no valid
-    prediction within ``max_age_s`` before them, are left out.
+    ``checkpoints_min`` defaults to the truth's own (``truth.checkpoints_min``). Checkpoints after
+    the true end of the discharge, or with no valid prediction within ``max_age_s`` before them,
+    are left out.
     """
+    if checkpoints_min is None:
+        checkpoints_min = truth.checkpoints_min
     valid = sorted((p for p in points if p.valid and math.isfinite(p.remaining_s)), key=lambda p: p.time_s)
     times = np.array([p.time_s for p in valid])
     out = []

@@ -12,10 +12,14 @@ import json
 import os
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from std_msgs.msg import Float64
 
 from battery_predictor.io.bags import write_recording_bag
 from battery_predictor.recording import Recording
@@ -90,3 +94,44 @@ def test_replay_refuses_a_pack_params_file_and_an_existing_output(short_bag: Pat
                            "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "exists" in proc.stderr
     assert (tmp_path / "o" / "outputs" / "keep.txt").exists()
+
+
+@pytest.fixture(scope="module")
+def measured_bag(tmp_path_factory) -> Path:
+    """40 min at 5 s of a relay recording that reaches the temi cut-off (13.30 V) and has no truth metadata."""
+    t = np.arange(0.0, 2400.0, 5.0)
+    v = 15.6 - 2.5 * t / 2400.0  # 13.30 V at 2208 s
+    i = np.where((t // 300) % 2 == 0, 1.5, 3.0)
+    path = tmp_path_factory.mktemp("bags") / "measured_relay"
+    write_recording_bag(Recording(t, v, i, np.full(t.size, 297.0)), path, style="relay")
+    return path
+
+
+def test_replay_of_a_measured_bag_takes_its_truth_from_the_recording_and_ignores_other_publishers(
+        measured_bag: Path, tmp_path: Path, ros_context, ros_domain_id: int) -> None:
+    # a "robot" on the environment's domain, publishing another pack's voltage and current on the replay's topics
+    node = rclpy.create_node("live_robot", context=ros_context)
+    pubs = [node.create_publisher(Float64, f"/battery/{name}", 10) for name in ("voltage", "current")]
+    node.create_timer(0.02, lambda: [pub.publish(Float64(data=12.0)) for pub in pubs])
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    try:
+        env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        argv = [str(CLI), "replay", str(measured_bag), "--params", str(REPO / "params/ros/temi_nodes.yaml"),
+                "--rate", "0", "--runtime-period", "300", "--out", str(tmp_path / "replay"), "--json"]
+        proc = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=600)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    # the private domain: the live publisher's 12.0 V samples never reach the replay's monitor
+    assert summary["pack_states"] == 480 and summary["rejected_samples"] == {}
+    # the recording's own end: the first 5 s window at or below 13.30 V, checkpoints at 10..90 % of it
+    assert summary["truth_source"] == "recording: cutoff_window"
+    assert 2205 / 60 <= summary["truth_runtime_min"] <= 2215 / 60
+    marks = [c["checkpoint_min"] for c in summary["checkpoints"]]
+    assert marks and all(0 < m < summary["truth_runtime_min"] for m in marks)
+    assert summary["errors"]["mae_min"] >= 0

@@ -12,9 +12,16 @@ import pytest
 
 from battery_predictor.cli.cmd_evaluate_runtime import parse_checkpoints
 from battery_predictor.errors import InputDataError
-from battery_predictor.evaluation.runtime_eval import Windows, counter_remaining_s, error_summary, find_discharge
+from battery_predictor.evaluation.runtime_eval import (
+    Windows,
+    counter_remaining_s,
+    error_summary,
+    find_discharge,
+    recording_runtime_truth,
+)
 from battery_predictor.params import load_params
 from battery_predictor.prediction.cell_runner import PackRunner
+from battery_predictor.recording import Recording
 
 REPO = Path(__file__).resolve().parents[2]
 CLI = REPO / ".venv" / "bin" / "battery-predictor"
@@ -106,3 +113,21 @@ def test_cli_refuses_bad_checkpoints_in_one_line(model_discharge_csv):
                            "--checkpoints", "0.5:2"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and "--checkpoints" in proc.stderr
+
+
+def test_recording_runtime_truth_is_the_first_window_at_the_cutoff_with_checkpoints_over_the_discharge() -> None:
+    params = load_params(REPO / "params" / "temi.yaml")
+    t = np.arange(0.0, 2400.0, 5.0)
+    rec = Recording(t, 15.6 - 2.5 * t / 2400.0, np.full(t.size, 2.0), np.full(t.size, 297.0))
+    truth = recording_runtime_truth(params, rec, 13.30, time_offset_s=100.0)
+    assert truth is not None and truth.source == "recording: cutoff_window"
+    assert 100.0 + 2205.0 <= truth.runtime_s <= 100.0 + 2215.0
+    assert len(truth.checkpoints_min) == 9
+    assert truth.checkpoints_min[0] * 60 == pytest.approx(100.0 + 0.1 * (truth.runtime_s - 100.0), abs=5.0)
+
+
+def test_recording_runtime_truth_is_none_when_the_recording_stops_far_above_the_cutoff() -> None:
+    params = load_params(REPO / "params" / "temi.yaml")
+    t = np.arange(0.0, 2400.0, 5.0)
+    rec = Recording(t, 16.0 - 0.2 * t / 2400.0, np.full(t.size, 2.0), np.full(t.size, 297.0))
+    assert recording_runtime_truth(params, rec, 13.30) is None
