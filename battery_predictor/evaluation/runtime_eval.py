@@ -182,6 +182,7 @@ def evaluate_recording(params: PackParams, rec: Recording, *, cutoff_v: float, c
         while k < win.time_s.size and win.time_s[k] <= t_cp:
             core.update_state(win.time_s[k], win.voltage_v[k], win.current_a[k], win.temperature_k[k],
                               win.peak_current_a[k])
+            core.precalibrate()  # as the node's pack-state callback: the state is carried window by window
             k += 1
         stamp = float(win.time_s[k - 1])
         answer = core.remaining_runtime(stamp)
