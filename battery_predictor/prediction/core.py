@@ -252,7 +252,7 @@ class PredictorCore:
         key = round(temperature_k)
         if key not in self._resistance_cache:
             try:
-                self._resistance_cache[key] = pulse_resistance_ohm(self.runner, float(key))
+                self._resistance_cache[key] = pulse_resistance_ohm(self._runner(), float(key))
             except BatteryPredictorError:
                 self._resistance_cache[key] = math.nan
         return self._resistance_cache[key]
@@ -301,7 +301,13 @@ class PredictorCore:
         with self._lock:
             return self._state
 
-    def _usable_state(self, now_s: float) -> tuple[int, str, tuple | None]:
+    def _runner(self) -> PackRunner:
+        """The pack model (raises when no params file could be loaded; answers check ``_usable_state`` first)."""
+        if self.runner is None:
+            raise BatteryPredictorError(f"no usable pack model: {self.model_error}")
+        return self.runner
+
+    def _usable_state(self, now_s: float) -> tuple[int, str, tuple[float, float, float, float] | None]:
         if self.runner is None:
             return STATUS_MODEL_NOT_FITTED, f"no usable pack model: {self.model_error}", None
         state = self.latest_state()
@@ -357,7 +363,8 @@ class PredictorCore:
         except BatteryPredictorError:
             pass
 
-    def _propagate(self, cached: tuple[float, float, Calibration], hist: list, temperature_k: float):
+    def _propagate(self, cached: tuple[float, float, Calibration], hist: list[tuple[float, float, float, float]],
+                   temperature_k: float) -> Calibration | None:
         """The cached state carried to now by the measured current, or None when it left the measurement."""
         newer = [h for h in hist if h[0] >= cached[0]]
         if len(newer) < 2:
@@ -365,7 +372,10 @@ class PredictorCore:
         t = np.array([h[0] for h in newer])
         i = np.array([h[2] for h in newer])
         segs = history_segments(t, i, max_segments=min(120, len(newer) - 1))
-        run = self.runner.run(cached[2].state, segs, temperature_k)
+        start = cached[2].state
+        if start is None:
+            return None
+        run = self._runner().run(start, segs, temperature_k)
         if run.final_state is None or run.reached_cutoff:
             return None
         residual = float(run.pack_voltage_v[-1]) - hist[-1][1]
@@ -374,17 +384,18 @@ class PredictorCore:
                 self.events.append((hist[-1][0], f"propagated state {residual:+.2f} V off the measurement: "
                                                   "recalibrated"))
             return None
-        cal = Calibration(self.runner.soc_of(run.final_state), residual, "", run.final_state, residual)
+        cal = Calibration(self._runner().soc_of(run.final_state), residual, "", run.final_state, residual)
         self._cal = (hist[-1][0], cached[1], cal)
         return cal
 
-    def _calibrate_fresh(self, hist: list, temperature_k: float) -> Calibration:
+    def _calibrate_fresh(self, hist: list[tuple[float, float, float, float]], temperature_k: float) -> Calibration:
         t = np.array([h[0] for h in hist])
         v = np.array([h[1] for h in hist])
         i = np.array([h[2] for h in hist])
         window = self.config.calibration_window_s
-        cal = calibrate_on_history(self.runner, t, v, i, temperature_k, window_s=max(window, 1.0)) if window > 0 \
-            else calibrate_on_history(self.runner, t[-1:], v[-1:], i[-1:], temperature_k)
+        runner = self._runner()
+        cal = calibrate_on_history(runner, t, v, i, temperature_k, window_s=max(window, 1.0)) if window > 0 \
+            else calibrate_on_history(runner, t[-1:], v[-1:], i[-1:], temperature_k)
         self._cal = (t[-1], t[-1], cal)
         return cal
 
@@ -400,7 +411,7 @@ class PredictorCore:
         """Remaining runtime until the cut-off under the present cycle's load (never raises for bad input)."""
         status, reason, state = self._usable_state(now_s)
         cutoff = self.cutoff_voltage_v
-        if status != STATUS_OK:
+        if status != STATUS_OK or state is None:
             return _invalid_runtime(now_s, cutoff, status, reason)
         stamp, v, i, t_k = state
         temp = self._temperature(t_k)
@@ -423,10 +434,10 @@ class PredictorCore:
             return _invalid_runtime(stamp, cutoff, STATUS_NO_LOAD,
                                     f"no discharge load in the present cycle to predict from ({what})",
                                     temperature_k=temp)
-        power = load.mean_power_w if kind.exponent > 0 else math.nan
-        power = power if math.isfinite(power) and power > 0 else None
+        mean_power_w = load.mean_power_w if kind.exponent > 0 else math.nan
+        power = mean_power_w if math.isfinite(mean_power_w) and mean_power_w > 0 else None
         try:
-            pred = predict_remaining_runtime(self.runner, v, i, temp, avg, cutoff,
+            pred = predict_remaining_runtime(self._runner(), v, i, temp, avg, cutoff,
                                              calibration=self.calibration(temp),
                                              peak_current_a=peak if math.isfinite(peak) else None,
                                              peak_duration_s=self._peak_duration_s(), average_power_w=power,
@@ -480,7 +491,7 @@ class PredictorCore:
         sigma = future_load_sigma(stamps, demand, pred.average_end_s)
         load = replace(load, sigma=sigma if math.isfinite(sigma) else 0.0)
         try:
-            return runtime_spread(self.runner, pred.calibration.start, pred.calibration.soc, pred, load,
+            return runtime_spread(self._runner(), pred.calibration.start, pred.calibration.soc, pred, load,
                                   self.uncertainty, self.state_voltage_sigma_v(pred.calibration), voltage_v)
         except BatteryPredictorError:
             return None
@@ -505,7 +516,7 @@ class PredictorCore:
         if not math.isfinite(threshold):
             return rejected("params define no route threshold (thresholds.route_min_voltage_v)", threshold)
         status, reason, state = self._usable_state(now_s)
-        if status != STATUS_OK:
+        if status != STATUS_OK or state is None:
             return rejected(f"state unknown: {reason}", threshold)
         _, v, i, t_k = state
         temp = self._temperature(t_k)
@@ -529,7 +540,7 @@ class PredictorCore:
             return rejected(f"the model cannot reproduce the measured {v:.2f} V (off by {cal.latest_residual_v:+.2f} V "
                             f"after calibration, tolerance {self.state_tolerance_v:.2f} V): state uncertain",
                             threshold, soc=soc)
-        decision = evaluate_route_at_risk(self.runner, cal.start, sections, temp, threshold_v=threshold,
+        decision = evaluate_route_at_risk(self._runner(), cal.start, sections, temp, threshold_v=threshold,
                                           standstill_current_a=self.standstill_current_a, currents=self._currents,
                                           risk=self.config.decision_risk, model=self.uncertainty,
                                           state_voltage_sigma_v=self.state_voltage_sigma_v(cal))
