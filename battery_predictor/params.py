@@ -17,13 +17,16 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from battery_predictor.errors import ParamsError
 from battery_predictor.ocp import cell_parameter_values, section_to_values, values_to_section
 from battery_predictor.params_checks import check_physical
+
+if TYPE_CHECKING:
+    import pybamm
 
 #: Unit suffixes accepted on our own (non-PyBaMM) keys.
 UNIT_SUFFIXES = (
@@ -238,7 +241,7 @@ class PackParams:
                               "it cannot be fitted as a scalar")
         return float(v)
 
-    def parameter_values(self):
+    def parameter_values(self) -> pybamm.ParameterValues:
         """PyBaMM ``ParameterValues``: base set updated with manual, fitted and extension values."""
         return cell_parameter_values(self.base_parameter_set, self.cell_values)
 
@@ -477,11 +480,11 @@ class _ByFingerprint:
 
 
 @functools.lru_cache(maxsize=512)
-def _parameter_values_of(keyed: _ByFingerprint):
+def _parameter_values_of(keyed: _ByFingerprint) -> pybamm.ParameterValues:
     return keyed.params.parameter_values()
 
 
-def cached_parameter_values(params: PackParams):
+def cached_parameter_values(params: PackParams) -> pybamm.ParameterValues:
     """``params.parameter_values()``, cached on the params' fingerprint (building a PyBaMM set costs ~10 ms).
 
     Shared by every caller: do not modify the result.

@@ -558,6 +558,7 @@ class Engine:
             v_cells = [v - drop for v in v_cells]
         r_eq_t = r_eq
         if post.series_activation_j_mol:
+            assert temp is not None  # read above whenever there is an activation energy
             r_eq_t = r_eq * series_resistance_factor(temp, post.series_activation_j_mol)
         reached = any(s.termination and "Minimum voltage" in str(s.termination) for s in sols)
         v_pack = pack_voltage_v(v_cells[0], i_pack, series=params.series, r_eq_ohm=r_eq_t,

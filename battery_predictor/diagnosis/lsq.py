@@ -48,7 +48,7 @@ class LsqResult:
     failures: int
 
 
-def _call_parallel(u: np.ndarray):
+def _call_parallel(u: np.ndarray) -> np.ndarray | None:
     try:
         r = np.asarray(shared("lsq_residual")(u), dtype=float)
         return r if np.all(np.isfinite(r)) else None
@@ -84,7 +84,7 @@ class ParallelEvaluator:
         self._pool.__enter__()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self._pool.__exit__(*exc)
 
     def map(self, points: list[np.ndarray]) -> list[np.ndarray | None]:
@@ -121,7 +121,7 @@ def budgeted_least_squares(fun: Callable[[np.ndarray], np.ndarray], starts: Sequ
 
     last: dict[str, np.ndarray] = {}
 
-    def record(u, r) -> np.ndarray:
+    def record(u: np.ndarray, r: np.ndarray | None) -> np.ndarray:
         if r is None:
             state.fail += 1
             r = failure_residual()
@@ -130,7 +130,7 @@ def budgeted_least_squares(fun: Callable[[np.ndarray], np.ndarray], starts: Sequ
             state.best_cost, state.best_u = cost, np.array(u, dtype=float)
         return r
 
-    def wrapped(u):
+    def wrapped(u: np.ndarray) -> np.ndarray:
         if state.n >= state.limit:
             raise _BudgetSpent
         state.n += 1
@@ -145,7 +145,7 @@ def budgeted_least_squares(fun: Callable[[np.ndarray], np.ndarray], starts: Sequ
         last["u"], last["r"] = np.array(u, dtype=float), r
         return r
 
-    def jacobian(u):
+    def jacobian(u: np.ndarray) -> np.ndarray:
         u = np.asarray(u, dtype=float)
         f0 = last["r"] if "u" in last and np.array_equal(last["u"], u) else wrapped(u)
         if state.n + u.size > state.limit:
