@@ -2,15 +2,22 @@
 
 from __future__ import annotations
 
+import argparse
 import datetime as _dt
 import shlex
 import sys
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from battery_predictor.cli.common import add_input_check_arguments, check_output_dir, check_output_file, print_json
 from battery_predictor.params import EXTENSION_NAMES
 
+if TYPE_CHECKING:
+    from battery_predictor.params import PackParams
+    from battery_predictor.recording import Recording
 
-def register(sub) -> None:
+
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "diagnose",
         help="name the cause of the model's error on observed data (temperature, capacity fade, ...)",
@@ -60,7 +67,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _load(paths, args, params):
+def _load(paths: Sequence[str], args: argparse.Namespace, params: PackParams) -> list[Recording]:
     from battery_predictor.fitting.problem import trim_to_discharge
     from battery_predictor.io.loader import load_recording
     from battery_predictor.params_checks import check_recordings_against_pack
@@ -79,7 +86,7 @@ def _load(paths, args, params):
     return recs
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from battery_predictor.diagnosis.diagnose import (
         DEFAULT_BUDGET,
         DEFAULT_REFERENCE_BUDGET,

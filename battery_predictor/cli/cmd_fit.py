@@ -8,6 +8,7 @@ reports identifiability; ``tpe`` is the seed paper's TPE over the params' raw ``
 
 from __future__ import annotations
 
+import argparse
 import datetime as _dt
 import sys
 from pathlib import Path
@@ -28,7 +29,7 @@ from battery_predictor.simulation import SIMULATORS
 DEFAULT_EVALUATIONS = 1000
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="fit a pack model to measured data (identifiable coordinates, or the paper's TPE)")
     p.add_argument("--params", required=True, help="params YAML to start from")
     add_data_arguments(p)
@@ -69,7 +70,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     args.no_progress = not progress_wanted(args)  # bars only on an interactive stderr, never with --json
     method = args.method or ("tpe" if args.trials is not None else "identify")
     if method == "identify":

@@ -17,13 +17,17 @@ checkpoints at 30, 60, ..., 300 min are printed.
 
 from __future__ import annotations
 
+import argparse
 import math
 import shutil
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from battery_predictor.nodes.client import Context
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="play a bag into the nodes, record their outputs (MCAP) and plot the runtime",
                        description=__doc__.split("\n\n")[0])
     p.add_argument("bag", help="rosbag2 directory or .mcap file with BatteryState or relay topics")
@@ -42,7 +46,7 @@ def register(sub) -> None:
 
 def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path | None = None,
                overwrite: bool = False, pack: str | None = None, runtime_period_s: float | None = None,
-               context=None, quiet: bool = False) -> dict:
+               context: Context | None = None, quiet: bool = False) -> dict:
     """Replay ``bag`` (see the module docstring); returns a summary dict.
 
     ``context``: an initialised rclpy context to use (default: init and shut down the global one).
@@ -128,7 +132,7 @@ def print_summary(summary: dict) -> None:
     print(f"wrote {summary['output_bag']} and {summary['plot']}")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from battery_predictor.cli.common import print_json
 
     summary = replay_bag(args.bag, args.params, rate=args.rate, out_dir=args.out, overwrite=args.overwrite,

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import argparse
 import time
+from typing import TYPE_CHECKING, Any
 
 from battery_predictor.cli.common import (
     add_data_arguments,
@@ -14,8 +16,11 @@ from battery_predictor.cli.common import (
 )
 from battery_predictor.simulation import SIMULATORS
 
+if TYPE_CHECKING:
+    from battery_predictor.simulation.base import PackSimResult
 
-def register(sub) -> None:
+
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("simulate", help="score a params file on measured data (R2_mod, RMSE, runtime)")
     p.add_argument("--params", required=True, help="params YAML (e.g. the output of fit)")
     add_data_arguments(p)
@@ -35,7 +40,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from battery_predictor.cli.fit_identify import simulator_named
@@ -52,7 +57,8 @@ def run(args) -> int:
     params = with_thermal(load_params(args.params), args.thermal)
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
     sim = simulator_named(args.simulator)
-    rows, results = [], []
+    rows: list[dict[str, Any]] = []
+    results: list[PackSimResult] = []
     for rec in recs:
         req = request_for_recording(params, rec, initial_state=args.initial_state, extend_s=0.5 * rec.duration_s)
         if req.initial_pack_ocv_v is not None and not starts_at_rest(params, rec):
@@ -73,7 +79,7 @@ def run(args) -> int:
             "initial_ocv_v": req.initial_pack_ocv_v,
         })
         results.append(res)
-    out = dict(rows[0]) if len(rows) == 1 else {
+    out: dict[str, Any] = dict(rows[0]) if len(rows) == 1 else {
         "r2_mod": sum(r["r2_mod"] for r in rows) / len(rows),
         "rmse_mV": sum(r["rmse_mV"] for r in rows) / len(rows),
         "runtime_s_measured": rows[0]["runtime_s_measured"],

@@ -2,23 +2,29 @@
 
 from __future__ import annotations
 
+import argparse
 import datetime as _dt
 import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from battery_predictor.cli.common import check_output_file, check_plot_file, data_options, load_data, print_json
 from battery_predictor.ocp import ocp_origin
 
+if TYPE_CHECKING:
+    from battery_predictor.simulation.base import PackSimulator
 
-def simulator_named(name: str):
+
+def simulator_named(name: str) -> PackSimulator:
     """The simulator of ``--simulator`` (:func:`~battery_predictor.simulation.get_simulator`)."""
     from battery_predictor.simulation import get_simulator
 
     return get_simulator(name)
 
 
-def _progress_printer(enabled: bool):
+def _progress_printer(enabled: bool) -> Callable[[str, int, float], None] | None:
     if not enabled:
         return None
 
@@ -29,7 +35,7 @@ def _progress_printer(enabled: bool):
     return show
 
 
-def run_identify(args) -> int:
+def run_identify(args: argparse.Namespace) -> int:
     """Run the identification, write the fitted params, plot, and report identifiability."""
     from battery_predictor.fitting.identifiable import default_space
     from battery_predictor.fitting.identification import (
