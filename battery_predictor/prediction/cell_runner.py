@@ -25,8 +25,10 @@ resistance's Arrhenius factor follows the cell temperature at every sample.
 from __future__ import annotations
 
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -39,6 +41,11 @@ from battery_predictor.simulation.extensions import (
     weak_group_params,
 )
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+if TYPE_CHECKING:
+    import pybamm
+
+    from battery_predictor.params import PackParams
 
 _CURRENT = "Current function [A]"
 _C_N0 = "Initial concentration in negative electrode [mol.m-3]"
@@ -107,7 +114,7 @@ class SegmentRun:
     final_state: RunState | None = None
 
 
-def _build_simulation(params):
+def _build_simulation(params: PackParams) -> pybamm.Simulation:
     """A built PyBaMM simulation of one cell of ``params`` with current, concentrations and temperature as inputs."""
     import pybamm
 
@@ -124,7 +131,8 @@ def _build_simulation(params):
     return sim
 
 
-def _step(sim, solution, duration_s: float, inputs: dict, t_interp: np.ndarray):
+def _step(sim: pybamm.Simulation, solution: pybamm.Solution | None, duration_s: float, inputs: dict,
+          t_interp: np.ndarray) -> tuple[pybamm.Solution, np.ndarray, np.ndarray]:
     """Step ``sim`` by ``duration_s`` from ``solution``; returns (solution, time_s from the step's start, cell V)."""
     new = sim.step(duration_s, starting_solution=solution, inputs=inputs, save=False, t_interp=t_interp)
     time_s = np.asarray(new.t, dtype=float)
@@ -133,7 +141,7 @@ def _step(sim, solution, duration_s: float, inputs: dict, t_interp: np.ndarray):
     return new, time_s, cell_voltage_v
 
 
-def _stopped_early(solution, time_s: np.ndarray, duration_s: float) -> bool:
+def _stopped_early(solution: pybamm.Solution, time_s: np.ndarray, duration_s: float) -> bool:
     """True when a step ended at the cell's lower cut-off (or otherwise before ``duration_s``)."""
     return bool(solution.termination and "Minimum voltage" in str(solution.termination)
                 or time_s[-1] < duration_s - 1e-6)
@@ -152,7 +160,7 @@ class PackRunner:
         Maximum spacing of output samples in s.
     """
 
-    def __init__(self, params, samples_per_segment: int = 4, max_spacing_s: float = 30.0) -> None:
+    def __init__(self, params: PackParams, samples_per_segment: int = 4, max_spacing_s: float = 30.0) -> None:
         from dataclasses import replace
 
         self.params = params
@@ -227,7 +235,7 @@ class PackRunner:
         return (x0 + soc * (x100 - x0)) * c_n, (y0 - soc * (y0 - y100)) * c_p
 
     # ------------------------------------------------------------------- runs
-    def run(self, start: float | RunState, segments, temperature_k: float) -> SegmentRun:
+    def run(self, start: float | RunState, segments: Sequence[tuple[float, float]], temperature_k: float) -> SegmentRun:
         """Run ``segments`` = [(duration_s, pack_current_a), ...] at ``temperature_k``.
 
         ``start`` is a SOC (uniform, relaxed particles; with ``cell_imbalance`` both groups at
@@ -323,7 +331,8 @@ class PackRunner:
                           end_time_s=t0, final_state=final)
 
     @staticmethod
-    def _truncated(sim, start_solution, longer_solution, duration_s: float, inputs: dict):
+    def _truncated(sim: pybamm.Simulation, start_solution: pybamm.Solution | None, longer_solution: pybamm.Solution,
+                   duration_s: float, inputs: dict) -> pybamm.Solution:
         """``sim``'s state ``duration_s`` after ``start_solution`` (the other group's cut-off time).
 
         Re-steps the group that ran past the other's cut-off, so that both solutions of the

@@ -12,17 +12,18 @@ from __future__ import annotations
 import math
 import threading
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.params import PackParams, load_params
 from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, history_segments
-from battery_predictor.prediction.cell_runner import PackRunner
 from battery_predictor.prediction.load_estimate import LoadEstimator, LoadKind
-from battery_predictor.prediction.pack_model import pack_model
+from battery_predictor.prediction.pack_model import PackModel, pack_model
 from battery_predictor.prediction.route import RouteDecision, rejected
 from battery_predictor.prediction.runtime import RuntimePrediction, predict_remaining_runtime
 from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v, unexplained_jump_v
@@ -35,6 +36,9 @@ from battery_predictor.prediction.uncertainty import (
     runtime_spread,
     uncertainty_model,
 )
+
+if TYPE_CHECKING:
+    from battery_predictor.profiles.ranger import RouteSection
 
 # Status codes, identical to battery_predictor_msgs/RemainingRuntime constants.
 STATUS_OK = 0
@@ -215,7 +219,7 @@ class PredictorCore:
         self.events: deque[tuple[float, str]] = deque(maxlen=100)
         self.model_error = ""
         self.params: PackParams | None = None
-        self.runner: PackRunner | None = None
+        self.runner: PackModel | None = None
         #: Which pack model answers, and why (engine or PyBaMM stepping).
         self.model_backend = ""
         try:
@@ -301,7 +305,7 @@ class PredictorCore:
         with self._lock:
             return self._state
 
-    def _runner(self) -> PackRunner:
+    def _runner(self) -> PackModel:
         """The pack model (raises when no params file could be loaded; answers check ``_usable_state`` first)."""
         if self.runner is None:
             raise BatteryPredictorError(f"no usable pack model: {self.model_error}")
@@ -504,7 +508,7 @@ class PredictorCore:
             return LoadKind(0.0, math.nan, math.nan, 0, False)
         return self._load.kind(resistance_ohm, AUTO_LOAD_PRIOR)
 
-    def can_accept_route(self, sections, now_s: float, *, starts_away_from_charger: bool = False,
+    def can_accept_route(self, sections: Sequence[RouteSection], now_s: float, *, starts_away_from_charger: bool = False,
                          ends_away_from_charger: bool = False) -> RouteDecision:
         """Decide a route (sections: :class:`~battery_predictor.profiles.ranger.RouteSection`).
 
@@ -577,7 +581,7 @@ def _invalid_runtime(stamp_s: float, cutoff_v: float, status: int, reason: str, 
     return RuntimeStatus(stamp_s, remaining_s, math.nan, temperature_k, math.nan, cutoff_v, False, status, reason)
 
 
-def _pick(*values) -> float:
+def _pick(*values: object) -> float:
     for v in values:
         if v is not None and isinstance(v, (int, float)) and math.isfinite(v):
             return float(v)
