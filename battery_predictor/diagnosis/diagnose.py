@@ -61,7 +61,7 @@ from battery_predictor.diagnosis.engine import (
     observe,
     soc_from_voltage,
 )
-from battery_predictor.diagnosis.lsq import budgeted_least_squares
+from battery_predictor.diagnosis.lsq import LsqResult, budgeted_least_squares
 from battery_predictor.diagnosis.reference import (
     DEFAULT_IDENTIFY_BUDGET,
     ReferenceFit,
@@ -126,7 +126,8 @@ def scan_initial_soc(engine: Engine, params: PackParams, obs: Observed, points: 
 
 def _fit_on(engine: Engine, cand: Candidate, params: PackParams, observed: Sequence[Observed],
             soc_guess: Sequence[float], budget: int, seed: int,
-            soc_box: Sequence[tuple[float, float]] | None = None):
+            soc_box: Sequence[tuple[float, float]] | None = None
+            ) -> tuple[dict[str, float], list[float], LsqResult, float]:
     """Budgeted least squares of ``cand``'s extra parameters and the initial SOCs on the fit parts.
 
     ``soc_box``: per recording, the (low, high) SOC its start may take (default 0..1; see
@@ -254,7 +255,7 @@ def combine_folds(cause: str, observed: Sequence[Observed], folds: Sequence[dict
 
 
 # --------------------------------------------------------------------------- procedure
-def _fit_task(task) -> tuple[str, int | None, CandidateResult | dict | str]:
+def _fit_task(task: tuple[int, Candidate, int | None]) -> tuple[str, int | None, CandidateResult | dict | str]:
     """Worker: fit one candidate, or one fold of it (the engine, params and data come from the forked parent)."""
     k, cand, held = task
     st = shared("diagnosis_fits")
@@ -271,8 +272,10 @@ def _fit_task(task) -> tuple[str, int | None, CandidateResult | dict | str]:
     return cand.name, held, res
 
 
-def _run_fits(engine, tasks, params, obs, soc_guess, budget, seed, workers, progress, split="time",
-              soc_box=None) -> dict:
+def _run_fits(engine: Engine, tasks: Sequence[tuple[int, Candidate]], params: PackParams, obs: list[Observed],
+              soc_guess: Sequence[float], budget: int, seed: int, workers: int,
+              progress: Callable[[str], None] | None, split: str = "time",
+              soc_box: Sequence[tuple[float, float]] | None = None) -> dict[str, CandidateResult | str]:
     """Fit every candidate, in ``workers`` forked processes when > 1 (each fit and each fold is independent).
 
     ``split="recordings"``: every candidate with extra parameters is fitted once per observed recording
@@ -294,10 +297,11 @@ def _run_fits(engine, tasks, params, obs, soc_guess, budget, seed, workers, prog
     parts: dict[str, dict] = {}
     out: dict[str, CandidateResult | str] = {}
 
-    def collect(name, held, res):
+    def collect(name: str, held: int | None, res: CandidateResult | dict | str) -> None:
         if isinstance(res, str):
             out[name] = res
         elif held is None:
+            assert not isinstance(res, dict)  # a fit on every recording (no fold) is a CandidateResult
             out[name] = res
         else:
             parts.setdefault(name, {})[held] = res
