@@ -247,23 +247,7 @@ class PackRunner:
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
             raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
         weak_sim = self._weak_sim
-        if isinstance(start, RunState):
-            sol, soc_start, charge0 = start.solution, start.soc_start, start.charge_ah
-            sol_w = start.weak_solution
-            if weak_sim is not None and sol is not None and sol_w is None:
-                raise SimulationError("the state to continue from has no weak-group solution "
-                                      "(made by a runner without cell_imbalance?)")
-            base = dict(start.base_inputs)
-            base[_T_AMB] = float(temperature_k)
-        else:
-            soc = float(start)
-            lo, hi = self.soc_bounds
-            if not np.isfinite(soc) or not (lo - 1e-9 <= soc <= hi + 1e-9):
-                raise SimulationError(f"SOC must be within {lo:.3f}..{hi:.3f} for this model, got {soc}")
-            c_n0, c_p0 = self.concentrations(soc)
-            base = {_C_N0: c_n0, _C_P0: c_p0, _T_AMB: float(temperature_k), _T_INIT: float(temperature_k)}
-            sol, sol_w, soc_start, charge0 = None, None, soc, 0.0
-        series = self.params.series
+        base, sol, sol_w, soc_start, charge0 = self._start(start, temperature_k)
         r_factor = float(series_resistance_factor(self.params, temperature_k))
         thermal = model_options(self.params).get("thermal", "isothermal") == "lumped"
         times, volts, amps, ends = [], [], [], []
@@ -294,19 +278,10 @@ class PackRunner:
                         break
                     raise SimulationError(f"pack model failed: {str(exc).splitlines()[0]}") from None
                 if weak_sim is None:
-                    v_pack = series * v_cell
+                    v_pack = self.params.series * v_cell
                 else:  # extension cell_imbalance: the group that reached its cut-off first ends the segment
-                    if t_w[-1] < t_seg[-1]:
-                        v_cell = np.interp(t_w, t_seg, v_cell)
-                        if t_cell is not None:
-                            t_cell = np.interp(t_w, t_seg, t_cell)
-                        t_seg = t_w
-                        new = self._truncated(self._sim, sol, new, float(t_w[-1]), inputs)
-                    else:
-                        v_w = np.interp(t_seg, t_w, v_w)
-                        if t_seg[-1] < t_w[-1]:
-                            new_w = self._truncated(weak_sim, sol_w, new_w, float(t_seg[-1]), inputs)
-                    v_pack = (series - 1) * v_cell + v_w
+                    t_seg, v_pack, t_cell, new, new_w = self._with_weak_group(
+                        (t_seg, v_cell, t_cell, sol, new), (t_w, v_w, sol_w, new_w), inputs)
                 times.append(t0 + t_seg)
                 # a lumped thermal cell: the series resistance's Arrhenius factor at the cell temperature
                 factor = r_factor if t_cell is None else series_resistance_factor(self.params, t_cell)
@@ -329,6 +304,54 @@ class PackRunner:
         return SegmentRun(time_s=np.concatenate(times), pack_voltage_v=np.concatenate(volts),
                           pack_current_a=np.concatenate(amps), segment_end_index=ends, reached_cutoff=cutoff,
                           end_time_s=t0, final_state=final)
+
+    def _start(self, start: float | RunState, temperature_k: float
+               ) -> tuple[dict[str, float], pybamm.Solution | None, pybamm.Solution | None, float, float]:
+        """What a run starts from: (the ``[input]`` values, the normal and the weak group's solution to continue
+        (None from an SOC), the SOC the state started from, the charge drawn since then in Ah)."""
+        if isinstance(start, RunState):
+            sol, sol_w = start.solution, start.weak_solution
+            if self._weak_sim is not None and sol is not None and sol_w is None:
+                raise SimulationError("the state to continue from has no weak-group solution "
+                                      "(made by a runner without cell_imbalance?)")
+            base = dict(start.base_inputs)
+            base[_T_AMB] = float(temperature_k)
+            return base, sol, sol_w, start.soc_start, start.charge_ah
+        soc = float(start)
+        lo, hi = self.soc_bounds
+        if not np.isfinite(soc) or not (lo - 1e-9 <= soc <= hi + 1e-9):
+            raise SimulationError(f"SOC must be within {lo:.3f}..{hi:.3f} for this model, got {soc}")
+        c_n0, c_p0 = self.concentrations(soc)
+        base = {_C_N0: c_n0, _C_P0: c_p0, _T_AMB: float(temperature_k), _T_INIT: float(temperature_k)}
+        return base, None, None, soc, 0.0
+
+    def _with_weak_group(self, normal: tuple[np.ndarray, np.ndarray, np.ndarray | None, pybamm.Solution | None,
+                                             pybamm.Solution],
+                         weak: tuple[np.ndarray, np.ndarray, pybamm.Solution | None, pybamm.Solution],
+                         inputs: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, pybamm.Solution,
+                                                pybamm.Solution]:
+        """One segment of the pack with a weak group (extension ``cell_imbalance``).
+
+        ``normal`` is a normal cell's (times s, voltage V, temperature K or None, solution before, solution
+        after) and ``weak`` the weak group's (times, voltage, solution before, after). The group that reached
+        its cut-off first ends the segment: the other is interpolated onto its times and re-stepped to its
+        end. Returns (times s, pack voltage V without the series resistance, cell temperature K or None,
+        normal solution, weak solution).
+        """
+        t_seg, v_cell, t_cell, sol, new = normal
+        t_w, v_w, sol_w, new_w = weak
+        assert self._weak_sim is not None  # called only with a weak group
+        if t_w[-1] < t_seg[-1]:
+            v_cell = np.interp(t_w, t_seg, v_cell)
+            if t_cell is not None:
+                t_cell = np.interp(t_w, t_seg, t_cell)
+            t_seg = t_w
+            new = self._truncated(self._sim, sol, new, float(t_w[-1]), inputs)
+        else:
+            v_w = np.interp(t_seg, t_w, v_w)
+            if t_seg[-1] < t_w[-1]:
+                new_w = self._truncated(self._weak_sim, sol_w, new_w, float(t_seg[-1]), inputs)
+        return t_seg, (self.params.series - 1) * v_cell + v_w, t_cell, new, new_w
 
     @staticmethod
     def _truncated(sim: pybamm.Simulation, start_solution: pybamm.Solution | None, longer_solution: pybamm.Solution,
