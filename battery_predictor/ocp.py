@@ -17,11 +17,16 @@ formula; :func:`pybamm_ocp` and :func:`evaluate` call it with PyBaMM's or NumPy'
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from battery_predictor.errors import ParamsError
+
+if TYPE_CHECKING:
+    import pybamm
+
+    from battery_predictor.params import PackParams
 
 #: PyBaMM key of the OCP a series replaces.
 POSITIVE_OCP_KEY = "Positive electrode OCP [V]"
@@ -51,7 +56,7 @@ def has_series(values: Mapping[str, Any]) -> bool:
     return CONSTANT_KEY in values
 
 
-def series_value(sto, values: Mapping[str, Any], tanh: Callable):
+def series_value(sto: Any, values: Mapping[str, Any], tanh: Callable[[Any], Any]) -> Any:
     """The series at stoichiometry ``sto`` (V), with ``tanh`` from NumPy or PyBaMM.
 
     Parameters
@@ -82,19 +87,19 @@ def pybamm_ocp(count: int) -> Callable:
 
     params = {key: pybamm.Parameter(key) for key in series_keys(count)}
 
-    def positive_ocp_series(sto):
+    def positive_ocp_series(sto: pybamm.Symbol) -> pybamm.Symbol:
         return series_value(sto, params, pybamm.tanh)
 
     return positive_ocp_series
 
 
-def apply_series(pv, values: Mapping[str, Any]) -> None:
+def apply_series(pv: pybamm.ParameterValues, values: Mapping[str, Any]) -> None:
     """Point ``pv``'s positive OCP at the series held in ``values`` (no-op without one)."""
     if has_series(values):
         pv.update({POSITIVE_OCP_KEY: pybamm_ocp(n_terms(values))}, check_already_exists=False)
 
 
-def cell_parameter_values(base_parameter_set: str, cell_values: Mapping[str, float]):
+def cell_parameter_values(base_parameter_set: str, cell_values: Mapping[str, float]) -> pybamm.ParameterValues:
     """PyBaMM ``ParameterValues``: ``base_parameter_set`` updated with ``cell_values`` (and their series).
 
     The one place a params file's cell values become PyBaMM values.
@@ -107,7 +112,7 @@ def cell_parameter_values(base_parameter_set: str, cell_values: Mapping[str, flo
     return pv
 
 
-def ocp_origin(params) -> str:
+def ocp_origin(params: PackParams) -> str:
     """Where the params' OCPs come from, for reports: ``"OCPs of Chen2020"`` or the measured positive's source."""
     if has_series(params.ocp):
         source = f" ({params.ocp_source})" if params.ocp_source else ""

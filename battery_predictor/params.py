@@ -17,13 +17,16 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import yaml
 
 from battery_predictor.errors import ParamsError
 from battery_predictor.ocp import cell_parameter_values, section_to_values, values_to_section
 from battery_predictor.params_checks import check_physical
+
+if TYPE_CHECKING:
+    import pybamm
 
 #: Unit suffixes accepted on our own (non-PyBaMM) keys.
 UNIT_SUFFIXES = (
@@ -238,7 +241,7 @@ class PackParams:
                               "it cannot be fitted as a scalar")
         return float(v)
 
-    def parameter_values(self):
+    def parameter_values(self) -> pybamm.ParameterValues:
         """PyBaMM ``ParameterValues``: base set updated with manual, fitted and extension values."""
         return cell_parameter_values(self.base_parameter_set, self.cell_values)
 
@@ -321,19 +324,65 @@ def _unit_scalars(section: Mapping[str, Any], name: str, source: str) -> dict[st
 def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackParams:
     """Validate a params mapping (as read from YAML) and build :class:`PackParams`.
 
+    The sections are checked in the file's order (top level, ``pack``, ``cell``, ``interconnect``,
+    ``thresholds``, ``operating``, ``fit``, ``extensions``, ``provenance``), so the first error
+    reported is the first one in the file.
+
     Raises
     ------
     ParamsError
         On an unknown key, a key without a unit, a wrong type or a physically impossible value
         (:func:`battery_predictor.params_checks.check_physical`); the message names ``source`` and the key.
     """
+    _check_top_level(data, source)
+    name = str(data.get("name") or Path(source).stem)
+    series, parallel, pack_info = _pack_from(data, source)
+    cell = _cell_from(data, source)
+    interconnect = _interconnect_from(data, source)
+    thresholds = _unit_scalars(_section(data, "thresholds", source, required=False), "thresholds", source)
+    operating = _unit_scalars(_section(data, "operating", source, required=False), "operating", source)
+    fit = _fit_from(data, source, cell.base, frozenset(cell.extra))
+    extensions = _extensions_from(data, source)
+    provenance = data.get("provenance") or {}
+    if not isinstance(provenance, Mapping):
+        raise ParamsError(f"{source}: key 'provenance' must be a mapping")
+    params = PackParams(
+        name=name,
+        description=str(data.get("description") or ""),
+        series=series,
+        parallel=parallel,
+        base_parameter_set=cell.base,
+        model=cell.model,
+        options=cell.options,
+        manual=cell.manual,
+        fitted=cell.fitted,
+        extra=cell.extra,
+        ocp=cell.ocp,
+        ocp_source=cell.ocp_source,
+        interconnect=interconnect,
+        thresholds=thresholds,
+        operating=operating,
+        pack_info=pack_info,
+        fit=fit,
+        extensions=extensions,
+        provenance=dict(provenance),
+        source=source,
+    )
+    check_physical(params)
+    return params
+
+
+def _check_top_level(data: Any, source: str) -> None:
+    """``data`` is a mapping whose keys are all known sections."""
     if not isinstance(data, Mapping):
         raise ParamsError(f"{source}: top level must be a mapping")
     for key in data:
         if key not in _TOP_LEVEL:
             raise ParamsError(f"{source}: unknown key '{key}' (allowed: {', '.join(_TOP_LEVEL)})")
-    name = str(data.get("name") or Path(source).stem)
 
+
+def _pack_from(data: Mapping[str, Any], source: str) -> tuple[int, int, dict[str, float]]:
+    """The ``pack`` section: (cells in series, strings in parallel, the other values by their unit-suffixed keys)."""
     pack = _section(data, "pack", source)
     for key in pack:
         if key not in _PACK_KEYS:
@@ -347,18 +396,29 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
         if isinstance(val, bool) or not isinstance(val, int) or val < 1:
             raise ParamsError(f"{source}: key 'pack.{key}': expected a positive integer, got {val!r}")
     pack_info = {k: _as_float(v, source, f"pack.{k}") for k, v in pack.items() if k not in ("series", "parallel")}
+    return int(pack["series"]), int(pack["parallel"]), pack_info
 
+
+class _Cell(NamedTuple):
+    """The checked ``cell`` section."""
+
+    base: str
+    model: str
+    options: dict[str, Any]
+    extra: dict[str, float]
+    manual: dict[str, float]
+    fitted: dict[str, float]
+    ocp: dict[str, float]
+    ocp_source: str
+
+
+def _cell_from(data: Mapping[str, Any], source: str) -> _Cell:
+    """The ``cell`` section: base set, model, options, extra/manual/fitted PyBaMM values, measured OCP."""
     cell = _section(data, "cell", source)
     for key in cell:
         if key not in _CELL_KEYS:
             raise ParamsError(f"{source}: unknown key 'cell.{key}' (allowed: {', '.join(_CELL_KEYS)})")
-    base = cell.get("base_parameter_set")
-    if not isinstance(base, str):
-        raise ParamsError(f"{source}: missing key 'cell.base_parameter_set' (a PyBaMM parameter set name)")
-    import pybamm
-
-    if base not in pybamm.parameter_sets:
-        raise ParamsError(f"{source}: key 'cell.base_parameter_set': unknown PyBaMM parameter set '{base}'")
+    base = _base_parameter_set(cell, source)
     model = str(cell.get("model", "SPM"))
     if model not in MODEL_TYPES:
         raise ParamsError(f"{source}: key 'cell.model': '{model}' is not one of {', '.join(MODEL_TYPES)}")
@@ -370,25 +430,45 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
         if "[" not in str(key) and not str(key).endswith("fraction"):
             raise ParamsError(f"{source}: key 'cell.extra.{key}': missing unit (use a PyBaMM '[unit]' key)")
         extra[str(key)] = _as_float(val, source, f"cell.extra.{key}")
-    values: dict[str, dict[str, float]] = {}
-    for sec in ("manual", "fitted"):
-        values[sec] = {}
-        raw = cell.get(sec) or {}
-        if not isinstance(raw, Mapping):
-            raise ParamsError(f"{source}: key 'cell.{sec}' must be a mapping of PyBaMM keys to numbers")
-        for key, val in raw.items():
-            check_pybamm_key(str(key), base, source, frozenset(extra))
-            values[sec][str(key)] = _as_float(val, source, f"cell.{sec}.{key}")
-
+    manual = _pybamm_values(cell, "manual", base, frozenset(extra), source)
+    fitted = _pybamm_values(cell, "fitted", base, frozenset(extra), source)
     ocp_raw = cell.get("ocp") or {}
     if not isinstance(ocp_raw, Mapping):
         raise ParamsError(f"{source}: key 'cell.ocp' must be a mapping (see battery_predictor/ocp.py)")
     ocp = section_to_values(ocp_raw, source)
     ocp_source = str((ocp_raw.get("positive") or {}).get("source", "")) if ocp else ""
+    return _Cell(base, model, dict(options), extra, manual, fitted, ocp, ocp_source)
 
-    inter_raw = _section(data, "interconnect", source, required=False)
+
+def _base_parameter_set(cell: Mapping[str, Any], source: str) -> str:
+    """``cell.base_parameter_set``: the name of one of PyBaMM's parameter sets."""
+    base = cell.get("base_parameter_set")
+    if not isinstance(base, str):
+        raise ParamsError(f"{source}: missing key 'cell.base_parameter_set' (a PyBaMM parameter set name)")
+    import pybamm
+
+    if base not in pybamm.parameter_sets:
+        raise ParamsError(f"{source}: key 'cell.base_parameter_set': unknown PyBaMM parameter set '{base}'")
+    return base
+
+
+def _pybamm_values(cell: Mapping[str, Any], section: str, base: str, extra_keys: frozenset[str],
+                   source: str) -> dict[str, float]:
+    """``cell.<section>`` (``manual`` or ``fitted``): PyBaMM keys of ``base`` (or of ``cell.extra``) to numbers."""
+    raw = cell.get(section) or {}
+    if not isinstance(raw, Mapping):
+        raise ParamsError(f"{source}: key 'cell.{section}' must be a mapping of PyBaMM keys to numbers")
+    out = {}
+    for key, val in raw.items():
+        check_pybamm_key(str(key), base, source, extra_keys)
+        out[str(key)] = _as_float(val, source, f"cell.{section}.{key}")
+    return out
+
+
+def _interconnect_from(data: Mapping[str, Any], source: str) -> dict[str, float]:
+    """The ``interconnect`` section (Ohm, each > 0) over the defaults of a section left out."""
     interconnect = {"r_b_ohm": 1e-4, "r_c_ohm": 1e-2, "r_i_ohm": 1e-2, "r_t_ohm": 1e-5}
-    for key, val in inter_raw.items():
+    for key, val in _section(data, "interconnect", source, required=False).items():
         if key not in INTERCONNECT_KEYS:
             if not any(str(key).endswith(s) for s in UNIT_SUFFIXES):
                 raise ParamsError(f"{source}: key 'interconnect.{key}': missing unit (expected one of "
@@ -399,10 +479,11 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
             raise ParamsError(f"{source}: key 'interconnect.{key}': resistance must be > 0 (liionpack's netlist "
                               f"needs a conductance), got {v}")
         interconnect[key] = v
+    return interconnect
 
-    thresholds = _unit_scalars(_section(data, "thresholds", source, required=False), "thresholds", source)
-    operating = _unit_scalars(_section(data, "operating", source, required=False), "operating", source)
 
+def _fit_from(data: Mapping[str, Any], source: str, base: str, extra_keys: frozenset[str]) -> FitSpec:
+    """The ``fit`` section: the parameters to fit (PyBaMM or interconnect keys) and their [low, high] bounds."""
     fit_raw = _section(data, "fit", source, required=False)
     for key in fit_raw:
         if key not in _FIT_KEYS:
@@ -411,7 +492,7 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
     for p in fit_raw.get("parameters") or []:
         p = str(p)
         if p not in INTERCONNECT_KEYS:
-            check_pybamm_key(p, base, source, frozenset(extra))
+            check_pybamm_key(p, base, source, extra_keys)
         fit_params.append(p)
     bounds = {}
     for key, pair in (fit_raw.get("bounds") or {}).items():
@@ -421,7 +502,11 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
         if not lo < hi:
             raise ParamsError(f"{source}: key 'fit.bounds.{key}': low {lo} must be below high {hi}")
         bounds[str(key)] = (lo, hi)
+    return FitSpec(parameters=tuple(fit_params), bounds=bounds)
 
+
+def _extensions_from(data: Mapping[str, Any], source: str) -> tuple[str, ...]:
+    """The ``extensions`` list: names of :data:`EXTENSION_NAMES`."""
     extensions = data.get("extensions") or []
     if not isinstance(extensions, list):
         raise ParamsError(f"{source}: key 'extensions' must be a list of extension names")
@@ -429,35 +514,7 @@ def params_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> PackP
         if ext not in EXTENSION_NAMES:
             raise ParamsError(f"{source}: key 'extensions': unknown extension '{ext}' "
                               f"(known: {', '.join(EXTENSION_NAMES)})")
-
-    provenance = data.get("provenance") or {}
-    if not isinstance(provenance, Mapping):
-        raise ParamsError(f"{source}: key 'provenance' must be a mapping")
-
-    params = PackParams(
-        name=name,
-        description=str(data.get("description") or ""),
-        series=int(pack["series"]),
-        parallel=int(pack["parallel"]),
-        base_parameter_set=base,
-        model=model,
-        options=dict(options),
-        manual=values["manual"],
-        fitted=values["fitted"],
-        extra=extra,
-        ocp=ocp,
-        ocp_source=ocp_source,
-        interconnect=interconnect,
-        thresholds=thresholds,
-        operating=operating,
-        pack_info=pack_info,
-        fit=FitSpec(parameters=tuple(fit_params), bounds=bounds),
-        extensions=tuple(str(e) for e in extensions),
-        provenance=dict(provenance),
-        source=source,
-    )
-    check_physical(params)
-    return params
+    return tuple(str(e) for e in extensions)
 
 
 class _ByFingerprint:
@@ -477,11 +534,11 @@ class _ByFingerprint:
 
 
 @functools.lru_cache(maxsize=512)
-def _parameter_values_of(keyed: _ByFingerprint):
+def _parameter_values_of(keyed: _ByFingerprint) -> pybamm.ParameterValues:
     return keyed.params.parameter_values()
 
 
-def cached_parameter_values(params: PackParams):
+def cached_parameter_values(params: PackParams) -> pybamm.ParameterValues:
     """``params.parameter_values()``, cached on the params' fingerprint (building a PyBaMM set costs ~10 ms).
 
     Shared by every caller: do not modify the result.

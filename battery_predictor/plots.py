@@ -45,7 +45,7 @@ def plot_voltage_fit(recordings: Sequence, results: Sequence, path: str | Path, 
 
 
 def ocv_figure(soc: Sequence[float] | np.ndarray, measured_v: Sequence[float] | np.ndarray,
-               model_v: Sequence[float] | np.ndarray, *, title: str):
+               model_v: Sequence[float] | np.ndarray, *, title: str) -> Figure:
     """Measured vs model open-circuit voltage against state of charge (a matplotlib ``Figure``).
 
     Parameters

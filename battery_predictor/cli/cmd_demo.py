@@ -20,10 +20,16 @@ so the demo never talks to another ROS system. Takes about a minute.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from battery_predictor.nodes.client import Context
+    from battery_predictor.nodes.replay_session import ReplaySession
 
 REPO = Path(__file__).resolve().parents[2]
 BAGS = REPO / "bags"
@@ -41,7 +47,7 @@ DEMO_TASKS = (("tickets and timetable", "information", 300.0, ""), ("guide to th
 DEMO_JOB = dict(start_node="platform13_north", pickup="platform11_south", dropoff="platform13_south", payload_kg=80.0)
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="replay a bundled temi bag through the nodes (runtime vs truth) and ask "
                                     "/can_accept_route for the longest route at 20-80 kg from a bundled Ranger state",
                        description=__doc__.split("\n\n")[0])
@@ -66,7 +72,7 @@ def _bag(name: str) -> Path:
     return path
 
 
-def _feasible_tasks(session, at_min: float) -> list[str]:
+def _feasible_tasks(session: ReplaySession, at_min: float) -> list[str]:
     """Ask /feasible_tasks for DEMO_TASKS at the entrance; the lines to print."""
     from battery_predictor.nodes.client import feasible_tasks
 
@@ -84,7 +90,7 @@ def _feasible_tasks(session, at_min: float) -> list[str]:
     return lines
 
 
-def _plan_route(session) -> list[str]:
+def _plan_route(session: ReplaySession) -> list[str]:
     """Ask /plan_route for DEMO_JOB; the lines to print."""
     from battery_predictor.nodes.client import PLANNED_ROUTE_KINDS, plan_route
 
@@ -103,7 +109,7 @@ def _plan_route(session) -> list[str]:
     return lines
 
 
-def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -> None:
+def _temi(context: Context, bag: Path, out: Path, rate: float, runtime_period_s: float) -> None:
     from battery_predictor.cli.common import progress_wanted, replay_progress
     from battery_predictor.nodes.replay_run import replay_into_nodes
     from battery_predictor.replay import DEFAULT_CHECKPOINTS_MIN, error_summary, read_replay_stream, runtime_truth
@@ -147,7 +153,7 @@ def _temi(context, bag: Path, out: Path, rate: float, runtime_period_s: float) -
     print(f"   plot {png}; node outputs {out / 'temi_outputs'} (MCAP)\n")
 
 
-def _ranger(context, bag: Path, at_min: float, rate: float) -> None:
+def _ranger(context: Context, bag: Path, at_min: float, rate: float) -> None:
     from battery_predictor.cli.common import progress_wanted, replay_progress
     from battery_predictor.nodes.client import can_accept_route
     from battery_predictor.nodes.replay_session import ReplaySession
@@ -222,7 +228,7 @@ def _real_data_figures(path: Path) -> None:
               "checkpoints (target 80 +- 10 %; docs/uncertainty)")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from battery_predictor.nodes.client import isolated_context
 
     temi_bag, ranger_bag = _bag(args.temi_bag), _bag(args.ranger_bag)

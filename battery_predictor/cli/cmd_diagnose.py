@@ -2,15 +2,25 @@
 
 from __future__ import annotations
 
+import argparse
 import datetime as _dt
 import shlex
 import sys
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 from battery_predictor.cli.common import add_input_check_arguments, check_output_dir, check_output_file, print_json
 from battery_predictor.params import EXTENSION_NAMES
 
+if TYPE_CHECKING:
+    from pathlib import Path
 
-def register(sub) -> None:
+    from battery_predictor.diagnosis.results import Diagnosis
+    from battery_predictor.params import PackParams
+    from battery_predictor.recording import Recording
+
+
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "diagnose",
         help="name the cause of the model's error on observed data (temperature, capacity fade, ...)",
@@ -60,7 +70,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _load(paths, args, params):
+def _load(paths: Sequence[str], args: argparse.Namespace, params: PackParams) -> list[Recording]:
     from battery_predictor.fitting.problem import trim_to_discharge
     from battery_predictor.io.loader import load_recording
     from battery_predictor.params_checks import check_recordings_against_pack
@@ -79,7 +89,7 @@ def _load(paths, args, params):
     return recs
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from battery_predictor.diagnosis.diagnose import (
         DEFAULT_BUDGET,
         DEFAULT_REFERENCE_BUDGET,
@@ -102,20 +112,7 @@ def run(args) -> int:
                     progress=None if args.quiet else default_progress, workers=args.workers, split=args.split)
     out = diag.to_json()
     if args.write_params and diag.judged:
-        from dataclasses import replace
-
-        extended = diag.extended_params()
-        extended = replace(extended, provenance={
-            **dict(extended.provenance),
-            "diagnosed_by": "battery-predictor diagnose",
-            "diagnosed_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-            "cause": diag.cause,
-            "gain_pct": diag.gain_pct,
-            "reference": [str(p) for p in args.reference],
-            "data": [str(p) for p in args.data],
-            "started_from": str(args.params),
-        })
-        out["params_written"] = str(extended.to_yaml(args.write_params))
+        out["params_written"] = str(_write_extended(diag, args))
     if args.report:
         from battery_predictor.diagnosis.report import write_report
         from battery_predictor.io.paths import portable_path
@@ -126,12 +123,36 @@ def run(args) -> int:
     if args.json:
         print_json(out)
         return 0
+    _print_diagnosis(diag, out, args)
+    return 0
+
+
+def _write_extended(diag: Diagnosis, args: argparse.Namespace) -> Path:
+    """Write the params with the winning extension and its fitted values to ``--write-params``; the path."""
+    from dataclasses import replace
+
+    extended = diag.extended_params()
+    extended = replace(extended, provenance={
+        **dict(extended.provenance),
+        "diagnosed_by": "battery-predictor diagnose",
+        "diagnosed_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "cause": diag.cause,
+        "gain_pct": diag.gain_pct,
+        "reference": [str(p) for p in args.reference],
+        "data": [str(p) for p in args.data],
+        "started_from": str(args.params),
+    })
+    return extended.to_yaml(args.write_params)
+
+
+def _print_diagnosis(diag: Diagnosis, out: dict[str, Any], args: argparse.Namespace) -> None:
+    """The human-readable answer: the cause, the evidence, each candidate's held-out RMSE (mV) and gain (%)."""
     print(f"cause: {diag.cause}")
     print(diag.evidence)
     if not diag.judged:
         if args.write_params:
             print("no params written: nothing was judged")
-        return 0
+        return
     print(f"baseline held-out RMSE {diag.baseline.heldout_rmse_mV:.1f} mV; extended ({diag.extended.cause}) "
           f"{diag.extended.heldout_rmse_mV:.1f} mV; gain {diag.gain_pct:.1f} %")
     for c in diag.candidates:
@@ -143,4 +164,3 @@ def run(args) -> int:
         print(f"wrote {out['params_written']}")
     if args.report:
         print(f"wrote {out['report']}")
-    return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from battery_predictor.cli.common import check_output_dir, print_json
@@ -10,7 +11,7 @@ from battery_predictor.evaluation.pipeline import BASE_SETS, PARTS
 REPO = Path(__file__).resolve().parents[2]
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="reproduce the paper's evaluation (Table 2, Fig. 4/5/7/8) on recordings")
     p.add_argument("--bags", default=str(REPO / "bags"), help="directory of the bundled bags")
     p.add_argument("--temi-params", default=str(REPO / "params" / "temi.yaml"))
@@ -38,7 +39,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from battery_predictor.evaluation.pipeline import (
         PaperEvaluation,
         bundled_recordings,

@@ -7,16 +7,23 @@ plot of predicted vs true remaining runtime per recording and the figures as JSO
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import time
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from battery_predictor.cli.common import add_input_check_arguments, check_output_dir, print_json
 from battery_predictor.errors import InputDataError
 
+if TYPE_CHECKING:
+    from battery_predictor.evaluation.runtime_eval import RecordingResult
+    from battery_predictor.recording import Recording
 
-def register(sub) -> None:
+
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate-runtime",
                        help="remaining runtime on measured recordings: predictor vs Coulomb counters")
     p.add_argument("--params", required=True, help="fitted pack params YAML")
@@ -68,7 +75,7 @@ def parse_checkpoints(text: str) -> tuple[float, ...]:
     return tuple(values)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from battery_predictor.evaluation import runtime_eval as ev
     from battery_predictor.io.loader import load_recording
     from battery_predictor.params import load_params
@@ -83,7 +90,7 @@ def run(args) -> int:
     if not (math.isfinite(cutoff_v) and cutoff_v > 0):
         raise InputDataError(f"{params.source}: no cut-off voltage in the params; pass --cutoff-v V")
 
-    def load(path: str):
+    def load(path: str) -> Recording:
         return load_recording(path, duplicate_times=args.duplicate_times, drop_nan=args.drop_nan,
                               expect_discharge=None if args.expect_discharge else False)
 
@@ -141,7 +148,7 @@ def _interval_line(f: dict) -> str:
             f"{_fmt(f['below_p10_pct'], '.0f')} %, above P90 {_fmt(f['above_p90_pct'], '.0f')} % of {f['intervals']}")
 
 
-def _print_recording(res, counters: list[str]) -> None:
+def _print_recording(res: RecordingResult, counters: list[str]) -> None:
     from battery_predictor.evaluation.runtime_eval import summarise
 
     block = summarise([res], counters)["per_recording"][0]
@@ -170,7 +177,7 @@ def _print_pooled(summary: dict) -> None:
         print(f"written: {summary['out']}/report.md, summary.json, checkpoints.json, runtime.png")
 
 
-def _write_outputs(out_dir: Path, summary: dict, results) -> None:
+def _write_outputs(out_dir: Path, summary: dict, results: Sequence[RecordingResult]) -> None:
     from battery_predictor.evaluation.runtime_eval import result_rows
     from battery_predictor.evaluation.runtime_plot import plot_runtime
 

@@ -8,9 +8,12 @@ reports identifiability; ``tpe`` is the seed paper's TPE over the params' raw ``
 
 from __future__ import annotations
 
+import argparse
 import datetime as _dt
 import sys
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from battery_predictor.cli.common import (
     add_data_arguments,
@@ -24,11 +27,18 @@ from battery_predictor.cli.common import (
 )
 from battery_predictor.simulation import SIMULATORS
 
+if TYPE_CHECKING:
+    from battery_predictor.fitting.identifiability import IdentifiabilityReport
+    from battery_predictor.fitting.optimiser import FitResult
+    from battery_predictor.fitting.problem import Evaluation
+    from battery_predictor.fitting.space import FitParameter
+    from battery_predictor.recording import Recording
+
 #: Default budget of ``--method identify`` in model evaluations.
 DEFAULT_EVALUATIONS = 1000
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="fit a pack model to measured data (identifiable coordinates, or the paper's TPE)")
     p.add_argument("--params", required=True, help="params YAML to start from")
     add_data_arguments(p)
@@ -69,7 +79,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     args.no_progress = not progress_wanted(args)  # bars only on an interactive stderr, never with --json
     method = args.method or ("tpe" if args.trials is not None else "identify")
     if method == "identify":
@@ -78,6 +88,11 @@ def run(args) -> int:
         return run_identify(args)
     if args.trials is None:
         args.trials = 1000
+    return _run_tpe(args)
+
+
+def _run_tpe(args: argparse.Namespace) -> int:
+    """``fit --method tpe``: the paper's TPE fit of the raw parameters; writes the params file and the plot."""
     from battery_predictor.cli.fit_identify import simulator_named
     from battery_predictor.fitting.identification import raw_identifiability
     from battery_predictor.fitting.optimiser import TPEOptimiser
@@ -104,7 +119,33 @@ def run(args) -> int:
     result = optimiser.run(problem, space)
     best = problem.evaluate(result.best_values)
     report = raw_identifiability(problem, space, result.best_values)
-    fitted = params.with_values(result.best_values, provenance={
+    thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
+    fitted = params.with_values(result.best_values, provenance=_provenance(args, recs, best, result, report, thermal),
+                                fit=params.fit)
+    fitted.to_yaml(out)
+    plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
+    plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")
+    if args.json:
+        print_json({"method": "tpe", "r2_mod": best.r2_mod, "trials": result.trials,
+                    "failed_trials": result.failed_trials, "resumed_trials": result.resumed_trials,
+                    "improved": result.improved, "seconds": result.seconds, "params": result.best_values,
+                    "thermal": thermal, "identifiability": report.to_dict(), "out": str(out), "plot": str(plot_path),
+                    "engine_fallback": engine_fallback(best.results)})
+        return 0
+    print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
+          f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s; "
+          f"{'lumped thermal' if thermal == 'lumped' else 'isothermal'} cell)")
+    _print_values(result, space)
+    for line in report.summary_lines():
+        print(line)
+    print(f"wrote {out} and {plot_path}")
+    return 0
+
+
+def _provenance(args: argparse.Namespace, recs: Sequence[Recording], best: Evaluation, result: FitResult,
+                report: IdentifiabilityReport, thermal: str) -> dict[str, Any]:
+    """The fitted params file's ``provenance``: how, when and on what it was fitted, and the scores."""
+    return {
         "fitted_by": "battery-predictor fit (Optuna TPE, R2_mod of the seed paper Eq. 1-3)",
         "fitted_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "data": [str(r.source) for r in recs],
@@ -115,33 +156,19 @@ def run(args) -> int:
         "failed_trials": result.failed_trials,
         "seed": args.seed,
         "simulator": args.simulator,
-        "thermal": "lumped" if is_lumped_thermal(params) else "isothermal",
+        "thermal": thermal,
         "study": result.study_name,
         "storage": result.storage,
         "started_from": str(args.params),
         "identifiability": report.to_dict(),
-    }, fit=params.fit)
-    fitted.to_yaml(out)
-    plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
-    plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")
-    if args.json:
-        print_json({"method": "tpe", "r2_mod": best.r2_mod, "trials": result.trials,
-                    "failed_trials": result.failed_trials, "resumed_trials": result.resumed_trials,
-                    "improved": result.improved, "seconds": result.seconds, "params": result.best_values,
-                    "thermal": "lumped" if is_lumped_thermal(params) else "isothermal",
-                    "identifiability": report.to_dict(), "out": str(out), "plot": str(plot_path),
-                    "engine_fallback": engine_fallback(best.results)})
-        return 0
-    print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
-          f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s; "
-          f"{'lumped thermal' if is_lumped_thermal(params) else 'isothermal'} cell)")
+    }
+
+
+def _print_values(result: FitResult, space: Sequence[FitParameter]) -> None:
+    """Each fitted parameter's start and fitted value (a note first when no trial beat the start)."""
     if not result.improved:
         print("  no trial beat the start (trial 0, the params' own values): the fitted params equal the start; "
               "more --trials or other --parameters may help")
     for space_p in space:
         v = result.best_values[space_p.name]
         print(f"  {space_p.name:<58} {space_p.initial:>12.5g} -> {v:>12.5g}")
-    for line in report.summary_lines():
-        print(line)
-    print(f"wrote {out} and {plot_path}")
-    return 0

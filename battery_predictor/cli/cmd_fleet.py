@@ -10,14 +10,21 @@ on more machines, each with its own ``--seed``, and they share the work on every
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from battery_predictor.cli.common import add_input_check_arguments, data_options, load_data, print_json
 
+if TYPE_CHECKING:
+    from battery_predictor.fitting.fleet import PackFit
+    from battery_predictor.recording import Recording
 
-def register(sub) -> None:
+
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fleet", help="fit many packs of one design, sharing one Optuna storage (several workers)",
                        description=__doc__.split("\n\n")[0])
     fleet_sub = p.add_subparsers(dest="fleet_command", required=True)
@@ -46,7 +53,7 @@ def register(sub) -> None:
     f.set_defaults(func=run_fit)
 
 
-def run_fit(args) -> int:
+def run_fit(args: argparse.Namespace) -> int:
     from battery_predictor.cli.common import check_output_file
     from battery_predictor.cli.fit_identify import simulator_named
     from battery_predictor.errors import InputDataError
@@ -72,10 +79,10 @@ def run_fit(args) -> int:
     close_storage(open_storage(storage))  # unreachable or misspelt: one line before any work
     options = data_options(args)
 
-    def load(files):
+    def load(files: Sequence[str]) -> list[Recording]:
         return resample_all(load_data(files, pack=params, **options), args.resample)
 
-    def report(fit) -> None:
+    def report(fit: PackFit) -> None:
         if not args.json:
             joined = f", {fit.resumed_trials} already there" if fit.resumed_trials else ""
             print(f"{fit.pack}: R2_mod = {fit.r2_mod:.4f} ({fit.trials} trials, {fit.own_trials} here{joined}; "

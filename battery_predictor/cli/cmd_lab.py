@@ -13,13 +13,15 @@ measured by emulated instruments (10 Hz, 0.01 V / 0.1 A, 5 s averages).
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
+from typing import Any
 
 from battery_predictor.cli.common import check_output_dir, print_json
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("lab", help="emulated lab: regenerate the shipped bags (EMULATED data, not measured)")
     lab = p.add_subparsers(dest="lab_command", required=True)
 
@@ -44,7 +46,7 @@ def register(sub) -> None:
     one.set_defaults(func=run_one)
 
 
-def run_list(args) -> int:
+def run_list(args: argparse.Namespace) -> int:
     from battery_predictor.lab.experiments import catalogue
 
     rows = [{"name": e.name, "robot": e.robot, "kind": e.kind, "pack_id": e.pack_id, "profile_seed": e.profile_seed,
@@ -59,7 +61,7 @@ def run_list(args) -> int:
     return 0
 
 
-def _line(res) -> str:
+def _line(res: dict[str, Any]) -> str:
     truth = res["truth"]
     if "runtime_s" in truth:
         what = f"runtime to {truth['stop_voltage_v']:.2f} V {truth['runtime_s'] / 60:.1f} min"
@@ -70,13 +72,13 @@ def _line(res) -> str:
     return f"{res['name']}: {res['bytes'] / 1e6:.2f} MB, {what} ({res['seconds']:.0f} s)"
 
 
-def run_make_bags(args) -> int:
+def run_make_bags(args: argparse.Namespace) -> int:
     from battery_predictor.lab.experiments import make_bags
 
     check_output_dir(args.out, "--out")
     tic = time.perf_counter()
 
-    def progress(res) -> None:
+    def progress(res: dict[str, Any]) -> None:
         if not args.json:
             print(_line(res), flush=True)
         else:
@@ -92,7 +94,7 @@ def run_make_bags(args) -> int:
     return 0
 
 
-def run_one(args) -> int:
+def run_one(args: argparse.Namespace) -> int:
     from battery_predictor.lab.experiments import find_experiments, run_experiment
 
     check_output_dir(args.out, "--out")

@@ -7,12 +7,13 @@ negative OCP (see :mod:`battery_predictor.fitting.ocv`). Fit the result as usual
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from battery_predictor.cli.common import add_input_check_arguments, check_output_file, print_json
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ocv", help="take a cell's open-circuit voltage from a low-rate test into its params")
     p.add_argument("--params", required=True, help="pack params YAML (its negative OCP and balance are kept)")
     p.add_argument("--data", required=True, metavar="FILE",
@@ -28,7 +29,7 @@ def register(sub) -> None:
     p.set_defaults(func=run, expect_discharge=False)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from battery_predictor.errors import InputDataError

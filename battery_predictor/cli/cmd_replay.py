@@ -20,16 +20,19 @@ there (checkpoints at 10, 20, ..., 90 % of the discharge; the same truth as
 
 from __future__ import annotations
 
+import argparse
 import math
 import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from battery_predictor.replay import RuntimeTruth
+    from battery_predictor.nodes.client import Context
+    from battery_predictor.params import PackParams
+    from battery_predictor.replay import ReplayStream, RuntimePoint, RuntimeTruth
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="play a bag into the nodes, record their outputs (MCAP) and plot the runtime",
                        description=__doc__.split("\n\n")[0])
     p.add_argument("bag", help="rosbag2 directory or .mcap file with BatteryState or relay topics")
@@ -52,7 +55,7 @@ def register(sub) -> None:
 
 def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path | None = None,
                overwrite: bool = False, pack: str | None = None, runtime_period_s: float | None = None,
-               context=None, quiet: bool = False, shared_domain: bool = False) -> dict:
+               context: Context | None = None, quiet: bool = False, shared_domain: bool = False) -> dict:
     """Replay ``bag`` (see the module docstring); returns a summary dict.
 
     ``context``: an initialised rclpy context to use (default: a private one on a random ROS domain,
@@ -128,7 +131,8 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     return summary
 
 
-def measured_truth(bag: str, stream, pack_params, points) -> RuntimeTruth | None:
+def measured_truth(bag: str, stream: ReplayStream, pack_params: PackParams | None,
+                   points: list[RuntimePoint]) -> RuntimeTruth | None:
     """The truth of a bag without one in its metadata: the measured discharge's end at the published cut-off.
 
     None when the pack is unknown, no runtime message names a cut-off, the bag's battery samples
@@ -169,7 +173,7 @@ def print_summary(summary: dict) -> None:
     print(f"wrote {summary['output_bag']} and {summary['plot']}")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from battery_predictor.cli.common import print_json
 
     summary = replay_bag(args.bag, args.params, rate=args.rate, out_dir=args.out, overwrite=args.overwrite,

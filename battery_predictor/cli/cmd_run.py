@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run the battery monitor and predictor nodes in one process (Ctrl-C stops)",
                        description=__doc__.split("\n\n")[0])
     p.add_argument("--params", required=True, metavar="P.yaml",
@@ -40,7 +40,7 @@ def ros_arguments(params: str, *, pack: str | None = None, use_sim_time: bool = 
     return args + list(extra or [])
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from battery_predictor.nodes._main import spin_nodes
     from battery_predictor.nodes.battery_monitor_node import BatteryMonitorNode
     from battery_predictor.nodes.predictor_node import PredictorNode

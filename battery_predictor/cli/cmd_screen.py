@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import itertools
 import sys
 
@@ -12,7 +13,7 @@ COLUMNS_NOTE = ("runtime %: change of the time to the cut-off when the parameter
                 "R2: R2_mod of the voltage curve against the unchanged model's")
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("screen", help="rank the cell parameters by their effect on a 0.5C discharge")
     p.add_argument("--params", required=True, help="params YAML")
     p.add_argument("--c-rate", type=float, default=None, help="discharge rate in 1/h (default: params or 0.5)")
@@ -22,7 +23,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from battery_predictor.fitting.screening import screen, screenable_parameters
     from battery_predictor.params import load_params
     from battery_predictor.simulation import get_simulator

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import argparse
 import time
+from typing import TYPE_CHECKING, Any
 
 from battery_predictor.cli.common import (
     add_data_arguments,
@@ -14,8 +16,15 @@ from battery_predictor.cli.common import (
 )
 from battery_predictor.simulation import SIMULATORS
 
+if TYPE_CHECKING:
+    from collections.abc import Sequence
 
-def register(sub) -> None:
+    from battery_predictor.params import PackParams
+    from battery_predictor.recording import Recording
+    from battery_predictor.simulation.base import PackSimResult, PackSimulator
+
+
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("simulate", help="score a params file on measured data (R2_mod, RMSE, runtime)")
     p.add_argument("--params", required=True, help="params YAML (e.g. the output of fit)")
     add_data_arguments(p)
@@ -35,12 +44,8 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def run(args) -> int:
-    from dataclasses import replace
-
+def run(args: argparse.Namespace) -> int:
     from battery_predictor.cli.fit_identify import simulator_named
-    from battery_predictor.fitting.cost import r2_mod, rmse_v
-    from battery_predictor.fitting.problem import loaded_start_ocv_v, request_for_recording, starts_at_rest
     from battery_predictor.fitting.resample import resample_all
     from battery_predictor.params import load_params
 
@@ -51,10 +56,38 @@ def run(args) -> int:
 
     params = with_thermal(load_params(args.params), args.thermal)
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
-    sim = simulator_named(args.simulator)
-    rows, results = [], []
+    rows, results = _score(params, recs, simulator_named(args.simulator), args.initial_state)
+    out = _summary(rows, results, time.perf_counter() - tic, args.simulator)
+    out["engine_fallback"] = engine_fallback(results)  # why the engine handed a recording on (None: it did not)
+    out["thermal"] = "lumped" if is_lumped_thermal(params) else "isothermal"
+    if args.plot:
+        from battery_predictor.plots import plot_voltage_fit
+
+        out["plot"] = str(plot_voltage_fit(recs, results, args.plot, title=f"{params.name}: R2_mod = {out['r2_mod']:.4f}"))
+    if args.json:
+        print_json(out)
+        return 0
+    _print_summary(out, rows, args.simulator)
+    return 0
+
+
+def _score(params: PackParams, recs: Sequence[Recording], sim: PackSimulator,
+           initial_state: str) -> tuple[list[dict[str, Any]], list[PackSimResult]]:
+    """Simulate every recording from its start and score it: one row per recording and the simulations.
+
+    Each row has ``r2_mod``, ``rmse_mV``, the measured and simulated runtime (s; the simulated one
+    is the time to the recording's lowest voltage, None when the run never reaches it) and the
+    initial OCV used (V, None with the params' initial state).
+    """
+    from dataclasses import replace
+
+    from battery_predictor.fitting.cost import r2_mod, rmse_v
+    from battery_predictor.fitting.problem import loaded_start_ocv_v, request_for_recording, starts_at_rest
+
+    rows: list[dict[str, Any]] = []
+    results: list[PackSimResult] = []
     for rec in recs:
-        req = request_for_recording(params, rec, initial_state=args.initial_state, extend_s=0.5 * rec.duration_s)
+        req = request_for_recording(params, rec, initial_state=initial_state, extend_s=0.5 * rec.duration_s)
         if req.initial_pack_ocv_v is not None and not starts_at_rest(params, rec):
             # the first voltage of a recording that starts under load is not its OCV
             req = replace(req, initial_pack_ocv_v=loaded_start_ocv_v(params, rec, sim))
@@ -73,7 +106,14 @@ def run(args) -> int:
             "initial_ocv_v": req.initial_pack_ocv_v,
         })
         results.append(res)
-    out = dict(rows[0]) if len(rows) == 1 else {
+    return rows, results
+
+
+def _summary(rows: list[dict[str, Any]], results: list[PackSimResult], seconds: float,
+             simulator: str) -> dict[str, Any]:
+    """The JSON summary: the one row (or the mean scores of several, with ``per_file``), the wall time ``seconds``
+    (s), the simulator's name and the engine's own stepping time (s)."""
+    out: dict[str, Any] = dict(rows[0]) if len(rows) == 1 else {
         "r2_mod": sum(r["r2_mod"] for r in rows) / len(rows),
         "rmse_mV": sum(r["rmse_mV"] for r in rows) / len(rows),
         "runtime_s_measured": rows[0]["runtime_s_measured"],
@@ -81,29 +121,24 @@ def run(args) -> int:
         "per_file": rows,
     }
     out.pop("data", None)
-    out["seconds"] = time.perf_counter() - tic
-    out["simulator"] = args.simulator
+    out["seconds"] = seconds
+    out["simulator"] = simulator
     engine_s = [res.extra.get("engine_seconds") for res in results]
     #: the engine's own stepping time (s), without start-up, loading and extraction; None when it did not run
     out["engine_seconds"] = sum(engine_s) if all(e is not None for e in engine_s) and engine_s else None
-    out["engine_fallback"] = engine_fallback(results)  # why the engine handed a recording on (None: it did not)
-    out["thermal"] = "lumped" if is_lumped_thermal(params) else "isothermal"
-    if args.plot:
-        from battery_predictor.plots import plot_voltage_fit
+    return out
 
-        out["plot"] = str(plot_voltage_fit(recs, results, args.plot, title=f"{params.name}: R2_mod = {out['r2_mod']:.4f}"))
-    if args.json:
-        print_json(out)
-        return 0
+
+def _print_summary(out: dict[str, Any], rows: list[dict[str, Any]], simulator: str) -> None:
+    """The human-readable lines: one per recording, the simulator and timing, the engine's fallback, the plot."""
     for r in rows:
         ts = r["runtime_s_simulated"]
         print(f"{r['data']}: R2_mod {r['r2_mod']:.4f}, RMSE {r['rmse_mV']:.1f} mV, runtime measured "
               f"{r['runtime_s_measured'] / 60:.1f} min, simulated "
               f"{'n/a' if ts is None else f'{ts / 60:.1f} min'}")
     engine = f", engine stepping {1e3 * out['engine_seconds']:.1f} ms" if out["engine_seconds"] is not None else ""
-    print(f"({args.simulator} simulator, {out['thermal']} cell, {out['seconds']:.1f} s{engine})")
+    print(f"({simulator} simulator, {out['thermal']} cell, {out['seconds']:.1f} s{engine})")
     if out["engine_fallback"]:
         print(f"engine fallback: {out['engine_fallback']}")
-    if args.plot:
+    if "plot" in out:
         print(f"wrote {out['plot']}")
-    return 0

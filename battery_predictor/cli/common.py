@@ -8,13 +8,20 @@ import math
 import os
 import shutil
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from battery_predictor.errors import InputDataError
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording
+
+if TYPE_CHECKING:
+    import argparse
+    from contextlib import AbstractContextManager
+
+    from battery_predictor.replay.stream import ReplayStream
+    from battery_predictor.simulation.base import PackSimResult
 
 
 def load_data(paths: Sequence[str], *, trim: bool = True, duplicate_times: str = "error", drop_nan: bool = False,
@@ -45,7 +52,7 @@ def _clean(value: Any) -> Any:
     return value
 
 
-def engine_fallback(results) -> str | None:
+def engine_fallback(results: Iterable[PackSimResult]) -> str | None:
     """Why the engine handed simulations to another simulator (``extra["engine_fallback"]``), None when it did not."""
     reasons = sorted({res.extra["engine_fallback"] for res in results if res.extra.get("engine_fallback")})
     return "; ".join(reasons) if reasons else None
@@ -57,7 +64,7 @@ def print_json(obj: dict[str, Any]) -> None:
     sys.stdout.flush()
 
 
-def add_input_check_arguments(parser) -> None:
+def add_input_check_arguments(parser: argparse.ArgumentParser) -> None:
     """``--duplicate-times``, ``--drop-nan`` and ``--no-sign-check``: the ways out of the input checks."""
     parser.add_argument("--duplicate-times", choices=("error", "keep_first", "keep_last"), default="error",
                         help="CSV rows that repeat a timestamp: reject (default) or keep one")
@@ -67,13 +74,13 @@ def add_input_check_arguments(parser) -> None:
                         help="skip the current-sign check (current_A > 0 = discharge)")
 
 
-def data_options(args) -> dict[str, Any]:
+def data_options(args: argparse.Namespace) -> dict[str, Any]:
     """The :func:`load_data` options of a command that used :func:`add_data_arguments`."""
     return {"trim": not args.no_trim, "duplicate_times": args.duplicate_times, "drop_nan": args.drop_nan,
             "expect_discharge": args.expect_discharge}
 
 
-def add_data_arguments(parser) -> None:
+def add_data_arguments(parser: argparse.ArgumentParser) -> None:
     """``--data FILE [FILE...]``, ``--no-trim`` and :func:`add_input_check_arguments`."""
     parser.add_argument("--data", nargs="+", required=True, metavar="FILE",
                         help="CSV (time_s, voltage_V, current_A > 0 = discharge[, temperature_C]) or rosbag2 MCAP")
@@ -140,20 +147,22 @@ def check_output_dir(path: str | os.PathLike[str], option: str) -> Path:
     return p
 
 
-def bag_progress(stream, end_ns: int | None, desc: str, *, enabled: bool):
+def bag_progress(stream: ReplayStream, end_ns: int | None, desc: str, *,
+                 enabled: bool) -> AbstractContextManager[Callable[[float], None]]:
     """:func:`progress_bar` over a replay in bag minutes, with the ``on_step(t_ns)`` callback it needs."""
     last_ns = stream.end_ns if end_ns is None else min(end_ns, stream.end_ns)
     total_min = max(last_ns - stream.start_ns, 0) / 60e9
     return progress_bar(round(total_min, 1), desc, "bag min", enabled=enabled)
 
 
-def bag_step(update: Callable[[float], None], stream) -> Callable[[int], None]:
+def bag_step(update: Callable[[float], None], stream: ReplayStream) -> Callable[[int], None]:
     """The ``on_step(t_ns)`` of :meth:`ReplaySession.play_until` that moves a :func:`bag_progress` bar."""
     return lambda t_ns: update(round((t_ns - stream.start_ns) / 60e9, 1))
 
 
 @contextlib.contextmanager
-def replay_progress(stream, end_ns: int | None, desc: str, *, enabled: bool) -> Iterator[Callable[[int], None]]:
+def replay_progress(stream: ReplayStream, end_ns: int | None, desc: str, *,
+                    enabled: bool) -> Iterator[Callable[[int], None]]:
     """A :func:`bag_progress` bar over a replay up to ``end_ns``; yields its ``on_step(t_ns)``."""
     with bag_progress(stream, end_ns, desc, enabled=enabled) as update:
         yield bag_step(update, stream)
@@ -163,7 +172,7 @@ def replay_progress(stream, end_ns: int | None, desc: str, *, enabled: bool) -> 
 PROGRESS_DELAY_S = 2.0
 
 
-def progress_wanted(args=None, stream: TextIO | None = None) -> bool:
+def progress_wanted(args: argparse.Namespace | None = None, stream: TextIO | None = None) -> bool:
     """Progress bars go to an interactive stderr only, and never with ``--json`` or ``--no-progress``."""
     stream = sys.stderr if stream is None else stream
     if args is not None and (getattr(args, "json", False) or getattr(args, "no_progress", False)):

@@ -2,23 +2,34 @@
 
 from __future__ import annotations
 
+import argparse
 import datetime as _dt
 import sys
 import warnings
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from battery_predictor.cli.common import check_output_file, check_plot_file, data_options, load_data, print_json
 from battery_predictor.ocp import ocp_origin
 
+if TYPE_CHECKING:
+    from battery_predictor.fitting.identifiability import IdentifiabilityReport
+    from battery_predictor.fitting.identifiable import Coordinate
+    from battery_predictor.fitting.identification import CandidateScore, IdentificationResult
+    from battery_predictor.params import PackParams
+    from battery_predictor.recording import Recording
+    from battery_predictor.simulation.base import PackSimulator
 
-def simulator_named(name: str):
+
+def simulator_named(name: str) -> PackSimulator:
     """The simulator of ``--simulator`` (:func:`~battery_predictor.simulation.get_simulator`)."""
     from battery_predictor.simulation import get_simulator
 
     return get_simulator(name)
 
 
-def _progress_printer(enabled: bool):
+def _progress_printer(enabled: bool) -> Callable[[str, int, float], None] | None:
     if not enabled:
         return None
 
@@ -29,9 +40,8 @@ def _progress_printer(enabled: bool):
     return show
 
 
-def run_identify(args) -> int:
+def run_identify(args: argparse.Namespace) -> int:
     """Run the identification, write the fitted params, plot, and report identifiability."""
-    from battery_predictor.fitting.identifiable import default_space
     from battery_predictor.fitting.identification import (
         DEFAULT_STARTS,
         DEFAULT_TPE_FRACTION,
@@ -49,11 +59,7 @@ def run_identify(args) -> int:
     params = with_thermal(load_params(args.params), getattr(args, "thermal", "params"))
     thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", UserWarning)
-        space = default_space(params, recs, extra=tuple(args.coordinates))
-    for w in caught:
-        sys.stderr.write(f"warning: {w.message}\n")
+    space = _space(params, recs, tuple(args.coordinates))
     problem = IdentificationProblem(params=params, recordings=recs, simulator=simulator_named(args.simulator),
                                     space=space)
     result = identify(problem, evaluations=args.evaluations, seed=args.seed,
@@ -64,26 +70,8 @@ def run_identify(args) -> int:
     report = identifiability_of(problem, result.unit)
     out = Path(args.out)
     states = {str(r.source): result.coordinates[c.name] for r, c in zip(recs, space[-len(recs):], strict=True)}
-    fitted = params.with_values(best.values[0], provenance={
-        "fitted_by": "battery-predictor fit --method identify (TPE + trust-region least squares in identifiable "
-                     "coordinates, R2_mod of the seed paper Eq. 1-3)",
-        "fitted_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-        "data": [str(r.source) for r in recs],
-        "resample_s": args.resample,
-        "r2_mod": best.r2_mod,
-        "r2_mod_per_file": best.per_recording,
-        "rmse_mv_per_file": best.rmse_mv,
-        "coordinates": {k: v for k, v in result.coordinates.items() if not k.startswith("initial_ocv_v:")},
-        "initial_ocv_v_per_file": states,
-        "initial_state_of_this_file": "the first data file's",
-        "evaluations": result.evaluations,
-        "seed": args.seed,
-        "simulator": args.simulator,
-        "thermal": thermal,
-        "ocp": ocp_origin(params),
-        "identifiability": report.to_dict(),
-        "started_from": str(args.params),
-    }, fit=params.fit)
+    fitted = params.with_values(best.values[0], provenance=_provenance(args, params, recs, best, result, report,
+                                                                       states, thermal), fit=params.fit)
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")
@@ -104,3 +92,42 @@ def run_identify(args) -> int:
         print(line)
     print(f"wrote {out} and {plot_path}")
     return 0
+
+
+def _space(params: PackParams, recs: Sequence[Recording], extra: tuple[str, ...]) -> list[Coordinate]:
+    """The identifiable coordinates of ``params`` on ``recs`` (plus ``extra``); its warnings go to stderr."""
+    from battery_predictor.fitting.identifiable import default_space
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        space = default_space(params, recs, extra=extra)
+    for w in caught:
+        sys.stderr.write(f"warning: {w.message}\n")
+    return space
+
+
+def _provenance(args: argparse.Namespace, params: PackParams, recs: Sequence[Recording], best: CandidateScore,
+                result: IdentificationResult, report: IdentifiabilityReport, states: dict[str, float],
+                thermal: str) -> dict[str, Any]:
+    """The fitted params file's ``provenance``: how, when and on what it was identified, the scores and the
+    initial OCV (V) each data file started from."""
+    return {
+        "fitted_by": "battery-predictor fit --method identify (TPE + trust-region least squares in identifiable "
+                     "coordinates, R2_mod of the seed paper Eq. 1-3)",
+        "fitted_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "data": [str(r.source) for r in recs],
+        "resample_s": args.resample,
+        "r2_mod": best.r2_mod,
+        "r2_mod_per_file": best.per_recording,
+        "rmse_mv_per_file": best.rmse_mv,
+        "coordinates": {k: v for k, v in result.coordinates.items() if not k.startswith("initial_ocv_v:")},
+        "initial_ocv_v_per_file": states,
+        "initial_state_of_this_file": "the first data file's",
+        "evaluations": result.evaluations,
+        "seed": args.seed,
+        "simulator": args.simulator,
+        "thermal": thermal,
+        "ocp": ocp_origin(params),
+        "identifiability": report.to_dict(),
+        "started_from": str(args.params),
+    }

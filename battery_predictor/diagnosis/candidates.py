@@ -12,7 +12,9 @@ the baseline alike (:data:`Baseline`, the ``none`` candidate has no other parame
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -77,11 +79,12 @@ class Candidate:
     #: Starts of the fit (the budget is shared among them).
     starts = 1
 
-    def parameters(self, params: PackParams, observed=None) -> tuple[CandParam, ...]:
+    def parameters(self, params: PackParams, observed: Sequence[Observed] | None = None) -> tuple[CandParam, ...]:
         """The extra parameters and their bounds for ``params`` (and the observed recordings, when given)."""
         return ()
 
-    def start_points(self, params: PackParams, rng: np.random.Generator, observed=None) -> list[dict[str, float]]:
+    def start_points(self, params: PackParams, rng: np.random.Generator,
+                     observed: Sequence[Observed] | None = None) -> list[dict[str, float]]:
         """Starting values of the extra parameters, one dict per start."""
         base = {p.name: p.initial for p in self.parameters(params, observed)}
         out = [base]
@@ -105,11 +108,12 @@ class Candidate:
         """Ambient temperature (K) of the run: the recording's mean temperature (isothermal)."""
         return obs.mean_temperature_k
 
-    def concentrations(self, engine: Engine, params: PackParams, theta: dict[str, float], soc: float):
+    def concentrations(self, engine: Engine, params: PackParams, theta: dict[str, float],
+                       soc: float) -> tuple[float, float]:
         """Initial (c_n, c_p) in mol/m3 for ``soc``."""
         return engine.concentrations_for_soc(params, soc)
 
-    def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict:
+    def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict[str, Any]:
         """Keyword arguments of :meth:`Engine.simulate` (values, post, offset)."""
         return {}
 
@@ -177,7 +181,7 @@ class Temperature(Candidate):
     def _measured(obs: Observed) -> bool:
         return obs.temperature_k is not None and float(np.ptp(obs.temperature_k)) > 0.0
 
-    def parameters(self, params, observed=None):
+    def parameters(self, params: PackParams, observed: Sequence[Observed] | None = None) -> tuple[CandParam, ...]:
         out = (CandParam("diffusivity_activation_energy_J_mol", 0.0, 80000.0, 25000.0, unit="J/mol"),
                CandParam("cold_resistance_ohm", 1e-5, 0.2, 2e-3, log=True, unit="Ohm per cell at the anchor temperature"),
                CandParam("window_loss_per_k", 0.0, 0.02, 0.002, unit="1/K below the anchor temperature"))
@@ -185,16 +189,16 @@ class Temperature(Candidate):
             return out
         return out + (CandParam("heat_transfer_coefficient_W_m2K", 0.5, 200.0, 10.0, log=True, unit="W/m2/K"),)
 
-    def structure(self, params):
+    def structure(self, params: PackParams) -> PackParams:
         return self._with_extension(params, {ext.HEAT_TRANSFER: 10.0})
 
-    def extra_inputs(self):
+    def extra_inputs(self) -> tuple[str, ...]:
         return (ext.EA_NEG, ext.EA_POS, ext.EA_POS_FULL, ext.COLD_WINDOW, ext.HEAT_TRANSFER)
 
-    def ambient_k(self, obs):
+    def ambient_k(self, obs: Observed) -> float:
         return obs.first_temperature_k
 
-    def run_arguments(self, params, theta):
+    def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict[str, Any]:
         ea = theta["diffusivity_activation_energy_J_mol"]
         values = {ext.EA_NEG: ea, ext.EA_POS: ea,
                   ext.EA_POS_FULL: theta.get("full_lithiation_activation_energy_J_mol", 0.0),
@@ -204,7 +208,8 @@ class Temperature(Candidate):
         return {"values": values, "post": Post(cold_resistance_ohm=theta["cold_resistance_ohm"],
                                                anchor_k=ext.extension_value(params, ext.ANCHOR_TEMPERATURE))}
 
-    def simulate(self, engine, params, obs, theta, soc, t_end=None, want_temperature=False):
+    def simulate(self, engine: Engine, params: PackParams, obs: Observed, theta: dict[str, float], soc: float,
+                 t_end: float | None = None, want_temperature: bool = False) -> SimOut:
         measured = self._measured(obs)
         args = self.run_arguments(params, theta)
         struct = replace(params, extensions=tuple(dict.fromkeys([*params.extensions, self.name])))
@@ -218,7 +223,8 @@ class Temperature(Candidate):
                                ambient_k=self.ambient_k(obs), t_end=t_end, extra_inputs=inputs,
                                want_temperature=want_temperature, temperature_trace=measured, **args)
 
-    def extended_params(self, params, theta, socs, engine):
+    def extended_params(self, params: PackParams, theta: dict[str, float], socs: list[float],
+                        engine: Engine) -> PackParams:
         values = {ext.EA_NEG: theta["diffusivity_activation_energy_J_mol"],
                   ext.EA_POS: theta["diffusivity_activation_energy_J_mol"],
                   ext.COLD_RESISTANCE: theta["cold_resistance_ohm"],
@@ -236,7 +242,7 @@ class CapacityFade(Candidate):
              "lithium (inventory scaled)")
     signature = ("charge_throughput", "soc")
 
-    def parameters(self, params, observed=None):
+    def parameters(self, params: PackParams, observed: Sequence[Observed] | None = None) -> tuple[CandParam, ...]:
         return (CandParam("loss_of_active_material_negative", 0.0, 0.4, 0.02),
                 CandParam("loss_of_active_material_positive", 0.0, 0.4, 0.02),
                 CandParam("loss_of_lithium_inventory", 0.0, 0.4, 0.02))
@@ -257,15 +263,17 @@ class CapacityFade(Candidate):
         k = li / (eps_n * l_n * c_n0 + eps_p * l_p * c_p0)
         return params.with_values({EPS_N: eps_n, EPS_P: eps_p, C_N0: c_n0 * k, C_P0: c_p0 * k})
 
-    def concentrations(self, engine, params, theta, soc):
+    def concentrations(self, engine: Engine, params: PackParams, theta: dict[str, float],
+                       soc: float) -> tuple[float, float]:
         return engine.concentrations_for_soc(self.faded(params, theta), soc)
 
-    def run_arguments(self, params, theta):
+    def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict[str, Any]:
         pv = cached_parameter_values(params)
         return {"values": {EPS_N: float(pv[EPS_N]) * (1 - theta["loss_of_active_material_negative"]),
                            EPS_P: float(pv[EPS_P]) * (1 - theta["loss_of_active_material_positive"])}}
 
-    def extended_params(self, params, theta, socs, engine):
+    def extended_params(self, params: PackParams, theta: dict[str, float], socs: list[float],
+                        engine: Engine) -> PackParams:
         faded = self.faded(params, theta)
         values = {k: faded.fitted[k] for k in (EPS_N, EPS_P)}
         # initial concentrations: the first recording's fitted start state (same lithium inventory)
@@ -278,13 +286,14 @@ class ResistanceGrowth(Candidate):
     title = "film/contact resistance per cell (PyBaMM 'contact resistance' option)"
     signature = ("current",)
 
-    def parameters(self, params, observed=None):
+    def parameters(self, params: PackParams, observed: Sequence[Observed] | None = None) -> tuple[CandParam, ...]:
         return (CandParam("contact_resistance_ohm", 1e-5, 0.2, 2e-3, log=True, unit="Ohm per cell"),)
 
-    def run_arguments(self, params, theta):
+    def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict[str, Any]:
         return {"post": Post(contact_resistance_ohm=theta["contact_resistance_ohm"])}
 
-    def extended_params(self, params, theta, socs, engine):
+    def extended_params(self, params: PackParams, theta: dict[str, float], socs: list[float],
+                        engine: Engine) -> PackParams:
         return self._with_extension(params, {ext.CONTACT_RESISTANCE: theta["contact_resistance_ohm"]})
 
 
@@ -293,16 +302,17 @@ class CurrentOffset(Candidate):
     title = "constant bias of the current sensor (model driven by measured current - offset)"
     signature = ("time",)
 
-    def parameters(self, params, observed=None):
+    def parameters(self, params: PackParams, observed: Sequence[Observed] | None = None) -> tuple[CandParam, ...]:
         cap = float(params.pack_info.get("nominal_capacity_ah")
                     or float(params.parameter_values()["Nominal cell capacity [A.h]"]) * params.parallel)
         bound = 0.1 * cap  # 0.1 C: far above any healthy sensor
         return (CandParam("current_offset_a", -bound, bound, 0.0, unit="A (pack)"),)
 
-    def run_arguments(self, params, theta):
+    def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict[str, Any]:
         return {"offset_a": theta["current_offset_a"]}
 
-    def extended_params(self, params, theta, socs, engine):
+    def extended_params(self, params: PackParams, theta: dict[str, float], socs: list[float],
+                        engine: Engine) -> PackParams:
         return self._with_extension(params, {ext.CURRENT_OFFSET: theta["current_offset_a"]})
 
 
@@ -312,18 +322,19 @@ class CellImbalance(Candidate):
              "per-cell values in liionpack")
     signature = ("soc", "charge_throughput")
 
-    def parameters(self, params, observed=None):
+    def parameters(self, params: PackParams, observed: Sequence[Observed] | None = None) -> tuple[CandParam, ...]:
         return (CandParam("weak_group_capacity_fraction", 0.4, 1.0, 0.95),)
 
-    def applicable(self, params, observed):
+    def applicable(self, params: PackParams, observed: list[Observed]) -> str | None:
         if params.series < 2:
             return "a single series group has no other group to differ from"
         return None
 
-    def run_arguments(self, params, theta):
+    def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict[str, Any]:
         return {"post": Post(weak_fraction=theta["weak_group_capacity_fraction"])}
 
-    def extended_params(self, params, theta, socs, engine):
+    def extended_params(self, params: PackParams, theta: dict[str, float], socs: list[float],
+                        engine: Engine) -> PackParams:
         return self._with_extension(params, {ext.WEAK_FRACTION: theta["weak_group_capacity_fraction"]})
 
 
@@ -332,19 +343,20 @@ class ElectrolyteTransport(Candidate):
     title = "electrolyte polarisation (SPMe) with a fitted Bruggeman exponent (tortuosity)"
     signature = ("current",)
 
-    def parameters(self, params, observed=None):
+    def parameters(self, params: PackParams, observed: Sequence[Observed] | None = None) -> tuple[CandParam, ...]:
         return (CandParam("bruggeman_exponent", 1.0, 6.0, 1.5),)
 
-    def structure(self, params):
+    def structure(self, params: PackParams) -> PackParams:
         return self._with_extension(params, {})
 
-    def extra_inputs(self):
+    def extra_inputs(self) -> tuple[str, ...]:
         return ext.BRUGGEMAN_KEYS
 
-    def run_arguments(self, params, theta):
+    def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict[str, Any]:
         return {"values": {k: theta["bruggeman_exponent"] for k in ext.BRUGGEMAN_KEYS}}
 
-    def extended_params(self, params, theta, socs, engine):
+    def extended_params(self, params: PackParams, theta: dict[str, float], socs: list[float],
+                        engine: Engine) -> PackParams:
         return self._with_extension(params, {ext.BRUGGEMAN: theta["bruggeman_exponent"]})
 
 
@@ -355,30 +367,32 @@ class Hysteresis(Candidate):
     signature = ("direction",)
     starts = 2
 
-    def parameters(self, params, observed=None):
+    def parameters(self, params: PackParams, observed: Sequence[Observed] | None = None) -> tuple[CandParam, ...]:
         return (CandParam("hysteresis_half_width_v", 0.0, 0.05, 0.005, unit="V per cell"),
                 CandParam("hysteresis_decay_rate", 1.0, 1000.0, 30.0, log=True, unit="per unit stoichiometry"),
                 CandParam("initial_hysteresis_state", -1.0, 1.0, -0.9))
 
-    def start_points(self, params, rng, observed=None):
+    def start_points(self, params: PackParams, rng: np.random.Generator,
+                     observed: Sequence[Observed] | None = None) -> list[dict[str, float]]:
         first = {p.name: p.initial for p in self.parameters(params, observed)}
         second = dict(first, initial_hysteresis_state=0.9)
         return [first, second][: max(self.starts, 1)]
 
-    def structure(self, params):
+    def structure(self, params: PackParams) -> PackParams:
         return self._with_extension(params, {})
 
-    def extra_inputs(self):
+    def extra_inputs(self) -> tuple[str, ...]:
         return (ext.HYS_HALF_WIDTH, *ext.PYBAMM_HYS_DECAY_KEYS, ext.PYBAMM_HYS_INITIAL_KEY)
 
-    def run_arguments(self, params, theta):
+    def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict[str, Any]:
         values = {ext.HYS_HALF_WIDTH: theta["hysteresis_half_width_v"],
                   ext.PYBAMM_HYS_INITIAL_KEY: theta["initial_hysteresis_state"]}
         for k in ext.PYBAMM_HYS_DECAY_KEYS:
             values[k] = theta["hysteresis_decay_rate"]
         return {"values": values}
 
-    def extended_params(self, params, theta, socs, engine):
+    def extended_params(self, params: PackParams, theta: dict[str, float], socs: list[float],
+                        engine: Engine) -> PackParams:
         # the predictor starts a discharge on the discharge branch
         return self._with_extension(params, {ext.HYS_HALF_WIDTH: theta["hysteresis_half_width_v"],
                                              ext.HYS_DECAY: theta["hysteresis_decay_rate"],

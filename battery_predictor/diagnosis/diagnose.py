@@ -61,7 +61,7 @@ from battery_predictor.diagnosis.engine import (
     observe,
     soc_from_voltage,
 )
-from battery_predictor.diagnosis.lsq import budgeted_least_squares
+from battery_predictor.diagnosis.lsq import LsqResult, budgeted_least_squares
 from battery_predictor.diagnosis.reference import (
     DEFAULT_IDENTIFY_BUDGET,
     ReferenceFit,
@@ -126,7 +126,8 @@ def scan_initial_soc(engine: Engine, params: PackParams, obs: Observed, points: 
 
 def _fit_on(engine: Engine, cand: Candidate, params: PackParams, observed: Sequence[Observed],
             soc_guess: Sequence[float], budget: int, seed: int,
-            soc_box: Sequence[tuple[float, float]] | None = None):
+            soc_box: Sequence[tuple[float, float]] | None = None
+            ) -> tuple[dict[str, float], list[float], LsqResult, float]:
     """Budgeted least squares of ``cand``'s extra parameters and the initial SOCs on the fit parts.
 
     ``soc_box``: per recording, the (low, high) SOC its start may take (default 0..1; see
@@ -254,7 +255,7 @@ def combine_folds(cause: str, observed: Sequence[Observed], folds: Sequence[dict
 
 
 # --------------------------------------------------------------------------- procedure
-def _fit_task(task) -> tuple[str, int | None, CandidateResult | dict | str]:
+def _fit_task(task: tuple[int, Candidate, int | None]) -> tuple[str, int | None, CandidateResult | dict | str]:
     """Worker: fit one candidate, or one fold of it (the engine, params and data come from the forked parent)."""
     k, cand, held = task
     st = shared("diagnosis_fits")
@@ -271,8 +272,10 @@ def _fit_task(task) -> tuple[str, int | None, CandidateResult | dict | str]:
     return cand.name, held, res
 
 
-def _run_fits(engine, tasks, params, obs, soc_guess, budget, seed, workers, progress, split="time",
-              soc_box=None) -> dict:
+def _run_fits(engine: Engine, tasks: Sequence[tuple[int, Candidate]], params: PackParams, obs: list[Observed],
+              soc_guess: Sequence[float], budget: int, seed: int, workers: int,
+              progress: Callable[[str], None] | None, split: str = "time",
+              soc_box: Sequence[tuple[float, float]] | None = None) -> dict[str, CandidateResult | str]:
     """Fit every candidate, in ``workers`` forked processes when > 1 (each fit and each fold is independent).
 
     ``split="recordings"``: every candidate with extra parameters is fitted once per observed recording
@@ -294,10 +297,11 @@ def _run_fits(engine, tasks, params, obs, soc_guess, budget, seed, workers, prog
     parts: dict[str, dict] = {}
     out: dict[str, CandidateResult | str] = {}
 
-    def collect(name, held, res):
+    def collect(name: str, held: int | None, res: CandidateResult | dict | str) -> None:
         if isinstance(res, str):
             out[name] = res
         elif held is None:
+            assert not isinstance(res, dict)  # a fit on every recording (no fold) is a CandidateResult
             out[name] = res
         else:
             parts.setdefault(name, {})[held] = res
@@ -405,17 +409,11 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
         the LG M50 0 degC discharges it changed the baseline's held-out RMSE by 1 % (146.6 -> 145.2 mV).
     """
     tic = time.perf_counter()
-    if not observed:
-        raise InputDataError("no observed data to diagnose")
-    if budget < 2:
-        raise BatteryPredictorError(f"--budget must be >= 2, got {budget}")
+    _check_arguments(observed, budget, split)
     engine = engine or Engine()
     workers = default_workers() if workers is None else max(1, int(workers))
-    if split not in ("auto", "time", "recordings"):
-        raise BatteryPredictorError(f"split must be auto, time or recordings, got {split!r}")
-    if split == "recordings" and len(observed) < 2:
-        raise BatteryPredictorError("the cross-recording split needs at least two observed recordings")
     reference = None
+    refs: list[Observed] = []
     if references:
         refs = [observe(r, params, fit_fraction=0.95, name=str(r.source)) for r in references]
         params, reference = identify_reference(params, references, reference_budget, seed, progress)
@@ -429,28 +427,11 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
                               time.perf_counter() - tic)
     if split == "auto":
         split = auto_split(obs)
-    soc_box = None
-    if start_at_rest and reference is not None:
-        tol_v = (reference.rmse_mV + 3.0 * 1e3 * noise_level_v(obs)) * 1e-3 / params.series
-        soc_box = [rest_soc_box(engine, params, o, tol_v) for o in obs]
-        pinned = [k for k, b in enumerate(soc_box) if b != (0.0, 1.0)]
-        if pinned:
-            _log(progress, f"{len(pinned)} recording(s) start at rest: their initial SOC is searched where the "
-                           f"open-circuit voltage is within {1e3 * tol_v:.0f} mV per cell of the first voltage")
+    soc_box = _rest_soc_boxes(engine, params, obs, reference, progress) if start_at_rest else None
     soc_guess = [scan_initial_soc(engine, params, o) for o in obs]
     if soc_box is not None:
         soc_guess = [min(max(g, lo), hi) for g, (lo, hi) in zip(soc_guess, soc_box)]
-    cands = [c for c in CANDIDATES if causes is None or c.name in causes]
-    unknown = set(causes or ()) - {c.name for c in CANDIDATES} - {"none"}
-    if unknown:
-        raise BatteryPredictorError(f"unknown cause(s): {', '.join(sorted(unknown))}")
-
-    tasks = [(0, Baseline())] + [(k + 1, c) for k, c in enumerate(cands)]
-    not_applicable: dict[str, str] = {}
-    for _k, cand in tasks:
-        reason = cand.applicable(params, obs)
-        if reason:
-            not_applicable[cand.name] = reason
+    tasks, not_applicable = _candidate_tasks(params, obs, causes)
     runnable = [(k, c) for k, c in tasks if c.name not in not_applicable]
     how = (f"one fold per recording (the others whole + the first {100 * fit_fraction:.0f} % of it)"
            if split == "recordings" else f"the first {100 * fit_fraction:.0f} % of every recording")
@@ -460,8 +441,63 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
     base = fitted["none"]
     if isinstance(base, str):
         raise BatteryPredictorError(f"the baseline cannot be simulated on the observed data: {base}")
+    results = _candidate_results(tasks[1:], fitted, not_applicable, base)
+    _log(progress, f"held-out RMSE: baseline {base.heldout_rmse_mV:.1f} mV; " + ", ".join(
+        f"{r.cause} {r.heldout_rmse_mV:.1f} mV ({r.gain_pct:+.0f} %)" for r in results if r.applicable))
+    return _decide(engine, params, obs, refs, reference, base, results,
+                   dict(seconds=time.perf_counter() - tic, budget=budget, fit_fraction=fit_fraction, split=split))
+
+
+def _check_arguments(observed: Sequence[Recording], budget: int, split: str) -> None:
+    """The arguments :func:`diagnose` refuses before any work (no data, a budget below 2, an unknown split)."""
+    if not observed:
+        raise InputDataError("no observed data to diagnose")
+    if budget < 2:
+        raise BatteryPredictorError(f"--budget must be >= 2, got {budget}")
+    if split not in ("auto", "time", "recordings"):
+        raise BatteryPredictorError(f"split must be auto, time or recordings, got {split!r}")
+    if split == "recordings" and len(observed) < 2:
+        raise BatteryPredictorError("the cross-recording split needs at least two observed recordings")
+
+
+def _rest_soc_boxes(engine: Engine, params: PackParams, obs: list[Observed], reference: ReferenceFit | None,
+                    progress: Callable[[str], None] | None) -> list[tuple[float, float]] | None:
+    """Per recording, the SOC range its start may take (:func:`rest_soc_box`); None without a reference fit.
+
+    The tolerance is the reference fit's RMSE plus three times the data's voltage noise, per cell (V).
+    """
+    if reference is None:
+        return None
+    tol_v = (reference.rmse_mV + 3.0 * 1e3 * noise_level_v(obs)) * 1e-3 / params.series
+    soc_box = [rest_soc_box(engine, params, o, tol_v) for o in obs]
+    pinned = [k for k, b in enumerate(soc_box) if b != (0.0, 1.0)]
+    if pinned:
+        _log(progress, f"{len(pinned)} recording(s) start at rest: their initial SOC is searched where the "
+                       f"open-circuit voltage is within {1e3 * tol_v:.0f} mV per cell of the first voltage")
+    return soc_box
+
+
+def _candidate_tasks(params: PackParams, obs: list[Observed], causes: Sequence[str] | None
+                     ) -> tuple[list[tuple[int, Candidate]], dict[str, str]]:
+    """The fits to run, ``(seed offset, candidate)`` with the baseline first, and why a candidate does not apply."""
+    cands = [c for c in CANDIDATES if causes is None or c.name in causes]
+    unknown = set(causes or ()) - {c.name for c in CANDIDATES} - {"none"}
+    if unknown:
+        raise BatteryPredictorError(f"unknown cause(s): {', '.join(sorted(unknown))}")
+    tasks: list[tuple[int, Candidate]] = [(0, Baseline())] + [(k + 1, c) for k, c in enumerate(cands)]
+    not_applicable: dict[str, str] = {}
+    for _k, cand in tasks:
+        reason = cand.applicable(params, obs)
+        if reason:
+            not_applicable[cand.name] = reason
+    return tasks, not_applicable
+
+
+def _candidate_results(tasks: Sequence[tuple[int, Candidate]], fitted: dict[str, CandidateResult | str],
+                       not_applicable: dict[str, str], base: CandidateResult) -> list[CandidateResult]:
+    """Every candidate's result with its held-out gain over ``base`` (%); one that did not apply or failed says why."""
     results = []
-    for _, cand in tasks[1:]:
+    for _, cand in tasks:
         res = fitted[cand.name] if cand.name in fitted else not_applicable[cand.name]
         if isinstance(res, str):
             res = CandidateResult(cause=cand.name, fitted={}, socs=[], heldout_rmse_mV=float("nan"),
@@ -470,15 +506,22 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
         else:
             res.gain_pct = 100.0 * (base.heldout_rmse_mV - res.heldout_rmse_mV) / base.heldout_rmse_mV
         results.append(res)
-    _log(progress, f"held-out RMSE: baseline {base.heldout_rmse_mV:.1f} mV; " + ", ".join(
-        f"{r.cause} {r.heldout_rmse_mV:.1f} mV ({r.gain_pct:+.0f} %)" for r in results if r.applicable))
+    return results
 
-    noise_v = noise_level_v(obs)
+
+def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[Observed],
+            reference: ReferenceFit | None, base: CandidateResult, results: list[CandidateResult],
+            run: dict[str, Any]) -> Diagnosis:
+    """Name the cause (:func:`choose_best`, :func:`claim_allowed`) and write the evidence.
+
+    ``run`` holds the :class:`Diagnosis` fields of the run itself (``seconds``, ``budget``,
+    ``fit_fraction``, ``split``).
+    """
     analysis = analyse_residuals(engine, params, obs, base)
     valid = [r for r in results if r.applicable and math.isfinite(r.heldout_rmse_mV)]
-    noise_mv = 1e3 * noise_v
+    noise_mv = 1e3 * noise_level_v(obs)
     shift_k = None
-    if references and all(o.temperature_k is not None for o in obs) and all(r.temperature_k is not None for r in refs):
+    if refs and all(o.temperature_k is not None for o in obs) and all(r.temperature_k is not None for r in refs):
         shift_k = float(np.mean([o.mean_temperature_k for o in obs]) - np.mean([r.mean_temperature_k for r in refs]))
     measured_first = ("temperature",) if shift_k is not None and abs(shift_k) > MEASURED_SHIFT_K else ()
     best = choose_best(valid, noise_mv, measured_first)
@@ -492,8 +535,7 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
     evidence = evidence_text(cause, base, best, results, analysis, noise_mv, close, floor_mv, shift_k)
     return Diagnosis(cause=cause, evidence=evidence, baseline=base, extended=extended, gain_pct=gain,
                      candidates=results, residuals=analysis, noise_mV=noise_mv, params=params, observed=obs,
-                     reference=reference, seconds=time.perf_counter() - tic, budget=budget,
-                     fit_fraction=fit_fraction, separable_with=close, split=split, temperature_shift_k=shift_k)
+                     reference=reference, separable_with=close, temperature_shift_k=shift_k, **run)
 
 
 def not_judged(params: PackParams, obs: Sequence[Observed], reference: ReferenceFit, reason: str, budget: int,

@@ -26,9 +26,12 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import InputDataError, SimulationError
 from battery_predictor.params import INTERCONNECT_KEYS, PackParams, cached_parameter_values
@@ -44,6 +47,9 @@ from battery_predictor.simulation.extensions import cold_resistance_excess_ohm
 from battery_predictor.simulation.fast import THICKNESS_TO_FRACTION
 from battery_predictor.simulation.load import StepLoad
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+if TYPE_CHECKING:
+    import pybamm
 
 _EDGE_S = 1e-3
 C_N0 = "Initial concentration in negative electrode [mol.m-3]"
@@ -157,7 +163,7 @@ def window_average(rec: Recording, period_s: float) -> Recording:
     idx = np.floor(t / period_s).astype(int)
     _, start, counts = np.unique(idx, return_index=True, return_counts=True)
 
-    def mean(x):
+    def mean(x: npt.ArrayLike) -> np.ndarray:
         return np.add.reduceat(np.asarray(x, dtype=float), start) / counts
 
     temp = None if rec.temperature_k is None else mean(rec.temperature_k)
@@ -361,7 +367,8 @@ class Engine:
             self._windows[key] = (x0, x100, (li - n_n * x100) / n_p, (li - n_n * x0) / n_p)
         return self._windows[key]
 
-    def _ocp_tables(self, params: PackParams, pv) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _ocp_tables(self, params: PackParams,
+                    pv: pybamm.ParameterValues) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         key = ("ocp", params.base_parameter_set, repr(pv["Negative electrode OCP [V]"]),
                repr(pv["Positive electrode OCP [V]"]))
         if key not in self._windows:
@@ -371,9 +378,9 @@ class Engine:
         return self._windows[key]
 
     @staticmethod
-    def loadings(pv, values: dict) -> tuple[float, float, float]:
+    def loadings(pv: pybamm.ParameterValues, values: dict) -> tuple[float, float, float]:
         """Per-area electrode capacities and lithium inventory (mol/m2): (n_neg, n_pos, n_li)."""
-        def get(k):
+        def get(k: str) -> float:
             return float(values.get(k, pv[k]))
 
         n_n = get(EPS_N) * get(L_N) * float(pv["Maximum concentration in negative electrode [mol.m-3]"])
@@ -381,7 +388,7 @@ class Engine:
         li = get(EPS_N) * get(L_N) * get(C_N0) + get(EPS_P) * get(L_P) * get(C_P0)
         return n_n, n_p, li
 
-    def concentrations_for_soc(self, params: PackParams, soc: float, *, eps_scale=(1.0, 1.0),
+    def concentrations_for_soc(self, params: PackParams, soc: float, *, eps_scale: tuple[float, float] = (1.0, 1.0),
                                lithium_scale: float = 1.0) -> tuple[float, float]:
         """Initial (c_n, c_p) in mol/m3 for ``soc`` in the params' window.
 
@@ -404,7 +411,8 @@ class Engine:
         return x * c_n_max, y * c_p_max
 
     # ------------------------------------------------------------------ builds
-    def _build(self, params: PackParams, obs: Observed, input_keys: tuple[str, ...], temperature_trace: bool = False):
+    def _build(self, params: PackParams, obs: Observed, input_keys: tuple[str, ...], temperature_trace: bool = False
+               ) -> tuple[pybamm.Simulation, dict[str, float], pybamm.ParameterValues]:
         import pybamm
 
         mapped = _thickness_mappable(params)
@@ -534,8 +542,9 @@ class Engine:
         return equivalent_network_resistance_ohm(params.series, params.parallel, p["r_b_ohm"], p["r_c_ohm"],
                                                  p["r_t_ohm"])
 
-    def _result(self, params, obs: Observed, sols, t_end, r_eq, post: Post, offset_a, pv,
-                want_temperature) -> SimOut:
+    def _result(self, params: PackParams, obs: Observed, sols: list[pybamm.Solution], t_end: float | None,
+                r_eq: float, post: Post, offset_a: float, pv: pybamm.ParameterValues,
+                want_temperature: bool) -> SimOut:
         t_all = np.concatenate([obs.t, obs.t_tail])
         if t_end is not None:
             t_all = t_all[t_all <= t_end + 1e-9]
@@ -556,8 +565,9 @@ class Engine:
             assert temp is not None  # read above whenever there is a cold resistance
             drop = i_cell * cold_resistance_excess_ohm(post.cold_resistance_ohm, temp, post.anchor_k)
             v_cells = [v - drop for v in v_cells]
-        r_eq_t = r_eq
+        r_eq_t: float | np.ndarray = r_eq
         if post.series_activation_j_mol:
+            assert temp is not None  # read above whenever there is an activation energy
             r_eq_t = r_eq * series_resistance_factor(temp, post.series_activation_j_mol)
         reached = any(s.termination and "Minimum voltage" in str(s.termination) for s in sols)
         v_pack = pack_voltage_v(v_cells[0], i_pack, series=params.series, r_eq_ohm=r_eq_t,
@@ -579,7 +589,8 @@ class Engine:
                       end_time_s=float(t_sol_end), temperature_k=temp)
 
 
-def _evaluate_ocp(fn, sto: np.ndarray, pv=None) -> np.ndarray:
+def _evaluate_ocp(fn: Callable[..., Any] | tuple, sto: np.ndarray,
+                  pv: pybamm.ParameterValues | None = None) -> np.ndarray:
     """An OCP of a PyBaMM parameter set (function of stoichiometry, or data) on ``sto``.
 
     ``pv`` (the parameter values) resolves parameters the function refers to (a measured OCP's
@@ -603,7 +614,7 @@ def _evaluate_ocp(fn, sto: np.ndarray, pv=None) -> np.ndarray:
     return np.asarray(val, dtype=float).ravel()
 
 
-def _solve_ocv(tables, n_n: float, n_p: float, li: float, ocv_v: float) -> float:
+def _solve_ocv(tables: tuple[np.ndarray, np.ndarray, np.ndarray], n_n: float, n_p: float, li: float, ocv_v: float) -> float:
     """Negative stoichiometry x at which U_p(y) - U_n(x) = ``ocv_v`` with n_n x + n_p y = li."""
     grid, u_n, u_p = tables
     lo = max(grid[0], (li - n_p * grid[-1]) / n_n)

@@ -48,7 +48,7 @@ class LsqResult:
     failures: int
 
 
-def _call_parallel(u: np.ndarray):
+def _call_parallel(u: np.ndarray) -> np.ndarray | None:
     try:
         r = np.asarray(shared("lsq_residual")(u), dtype=float)
         return r if np.all(np.isfinite(r)) else None
@@ -65,6 +65,72 @@ class _Spent:
     best_cost: float = np.inf
     fail: int = 0
     limit: int = 0
+
+
+class _Counted:
+    """The residual and its forward-difference Jacobian, counted against the budget of
+    :func:`budgeted_least_squares` (raise :class:`_BudgetSpent` at the limit); a failed or
+    non-finite evaluation costs ``failure_residual()``, and the best point is kept in ``spent``.
+    """
+
+    def __init__(self, fun: Callable[[np.ndarray], np.ndarray], failure_residual: Callable[[], np.ndarray],
+                 diff_step: float, parallel: ParallelEvaluator | None) -> None:
+        self.fun = fun
+        self.failure_residual = failure_residual
+        self.diff_step = diff_step
+        self.parallel = parallel
+        self.spent = _Spent()
+        #: the last point evaluated and its residual (the Jacobian's f0 when it is asked there)
+        self.last: dict[str, np.ndarray] = {}
+
+    def record(self, u: np.ndarray, r: np.ndarray | None) -> np.ndarray:
+        """``r`` (the failure residual when None), with ``u`` kept when it is the best so far."""
+        state = self.spent
+        if r is None:
+            state.fail += 1
+            r = self.failure_residual()
+        cost = float(r @ r)
+        if cost < state.best_cost:
+            state.best_cost, state.best_u = cost, np.array(u, dtype=float)
+        return r
+
+    def residual(self, u: np.ndarray) -> np.ndarray:
+        """One counted evaluation of the residual at ``u``."""
+        state = self.spent
+        if state.n >= state.limit:
+            raise _BudgetSpent
+        state.n += 1
+        r: np.ndarray | None
+        try:
+            r = np.asarray(self.fun(u), dtype=float)
+            if not np.all(np.isfinite(r)):
+                r = None
+        except BatteryPredictorError:
+            r = None
+        r = self.record(u, r)
+        self.last["u"], self.last["r"] = np.array(u, dtype=float), r
+        return r
+
+    def jacobian(self, u: np.ndarray) -> np.ndarray:
+        """Forward differences (backward at the upper bound) at ``u``, the columns in the parallel workers."""
+        state, last, diff_step = self.spent, self.last, self.diff_step
+        u = np.asarray(u, dtype=float)
+        f0 = last["r"] if "u" in last and np.array_equal(last["u"], u) else self.residual(u)
+        if state.n + u.size > state.limit:
+            raise _BudgetSpent
+        steps = np.where(u + diff_step <= 1.0, diff_step, -diff_step)
+        points = []
+        for i in range(u.size):
+            p = u.copy()
+            p[i] += steps[i]
+            points.append(p)
+        assert self.parallel is not None  # the Jacobian is only used with a ParallelEvaluator
+        rows = self.parallel.map(points)
+        state.n += u.size
+        jac = np.empty((f0.size, u.size))
+        for i, (p, r) in enumerate(zip(points, rows)):
+            jac[:, i] = (self.record(p, r) - f0) / steps[i]
+        return jac
 
 
 class ParallelEvaluator:
@@ -84,7 +150,7 @@ class ParallelEvaluator:
         self._pool.__enter__()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self._pool.__exit__(*exc)
 
     def map(self, points: list[np.ndarray]) -> list[np.ndarray | None]:
@@ -117,52 +183,8 @@ def budgeted_least_squares(fun: Callable[[np.ndarray], np.ndarray], starts: Sequ
     if budget < 1:
         raise BatteryPredictorError(f"budget must be >= 1, got {budget}")
     diff_step = DIFF_STEP if diff_step is None else diff_step
-    state = _Spent()
-
-    last: dict[str, np.ndarray] = {}
-
-    def record(u, r) -> np.ndarray:
-        if r is None:
-            state.fail += 1
-            r = failure_residual()
-        cost = float(r @ r)
-        if cost < state.best_cost:
-            state.best_cost, state.best_u = cost, np.array(u, dtype=float)
-        return r
-
-    def wrapped(u):
-        if state.n >= state.limit:
-            raise _BudgetSpent
-        state.n += 1
-        r: np.ndarray | None
-        try:
-            r = np.asarray(fun(u), dtype=float)
-            if not np.all(np.isfinite(r)):
-                r = None
-        except BatteryPredictorError:
-            r = None
-        r = record(u, r)
-        last["u"], last["r"] = np.array(u, dtype=float), r
-        return r
-
-    def jacobian(u):
-        u = np.asarray(u, dtype=float)
-        f0 = last["r"] if "u" in last and np.array_equal(last["u"], u) else wrapped(u)
-        if state.n + u.size > state.limit:
-            raise _BudgetSpent
-        steps = np.where(u + diff_step <= 1.0, diff_step, -diff_step)
-        points = []
-        for i in range(u.size):
-            p = u.copy()
-            p[i] += steps[i]
-            points.append(p)
-        assert parallel is not None  # the Jacobian is only used with a ParallelEvaluator
-        rows = parallel.map(points)
-        state.n += u.size
-        jac = np.empty((f0.size, u.size))
-        for i, (p, r) in enumerate(zip(points, rows)):
-            jac[:, i] = (record(p, r) - f0) / steps[i]
-        return jac
+    counted = _Counted(fun, failure_residual, diff_step, parallel)
+    state, wrapped, jacobian = counted.spent, counted.residual, counted.jacobian
 
     starts = [np.clip(np.asarray(s, dtype=float), 1e-6, 1 - 1e-6) for s in starts] or [np.zeros(0)]
     n_dim = starts[0].size

@@ -23,6 +23,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.params import PackParams, cached_parameter_values
@@ -251,7 +252,8 @@ __all__ = ["DEFAULT_IDENTIFY_BUDGET", "POOR_EXCESS_MV_PER_CELL", "ReferenceFit",
            "identify_reference", "reference_verdict"]
 
 
-def reference_anchor_k(temperature_traces_k, currents_a) -> float:
+def reference_anchor_k(temperature_traces_k: Sequence[npt.ArrayLike | None], currents_a: Sequence[npt.ArrayLike]
+                       ) -> float:
     """The anchor temperature of the extension ``temperature`` from the reference recordings (K).
 
     The identified model's accessible capacity is set where each reference discharge ended, at the
@@ -272,8 +274,8 @@ def reference_anchor_k(temperature_traces_k, currents_a) -> float:
         The anchor temperature in K.
     """
     ends = []
-    for temp, cur in zip(temperature_traces_k, currents_a):
-        cur = np.asarray(cur, dtype=float)
+    for temp, current in zip(temperature_traces_k, currents_a):
+        cur = np.asarray(current, dtype=float)
         dis = np.nonzero(cur > 0.01 * max(float(np.max(cur)), 0.0))[0]
         ends.append(float(np.asarray(temp, dtype=float)[dis[-1] if dis.size else -1]))
     return float(np.mean(ends))

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -21,11 +22,15 @@ from matplotlib.figure import Figure
 
 from battery_predictor.diagnosis.residuals import _LABELS, FEATURES
 
+if TYPE_CHECKING:
+    from battery_predictor.diagnosis.reference import ReferenceFit
+    from battery_predictor.diagnosis.results import Diagnosis
+
 _UNITS = {"time": "h", "soc": "-", "charge_throughput": "Ah", "current": "A", "temperature": "K",
           "direction": "-1 charge / 0 rest / +1 discharge"}
 
 
-def _fmt(v, digits: int = 1) -> str:
+def _fmt(v: float | None, digits: int = 1) -> str:
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return "n/a"
     return f"{v:.{digits}f}"
@@ -38,7 +43,7 @@ def _figure(figsize: tuple[float, float]) -> Figure:
     return fig
 
 
-def plot_voltage(diag, path: Path) -> Path:
+def plot_voltage(diag: Diagnosis, path: Path) -> Path:
     n = len(diag.observed)
     fig = _figure((11, 5.5 * n))
     axes = fig.subplots(2 * n, 1, sharex=False, squeeze=False)
@@ -72,7 +77,7 @@ def plot_voltage(diag, path: Path) -> Path:
     return path
 
 
-def plot_residuals(diag, path: Path) -> Path:
+def plot_residuals(diag: Diagnosis, path: Path) -> Path:
     feats = [f for f in FEATURES if f in diag.residuals.eta2]
     cols = 3
     rows = max(1, math.ceil(len(feats) / cols))
@@ -98,7 +103,7 @@ def plot_residuals(diag, path: Path) -> Path:
     return path
 
 
-def plot_candidates(diag, path: Path) -> Path:
+def plot_candidates(diag: Diagnosis, path: Path) -> Path:
     rows = [("none (baseline)", diag.baseline.heldout_rmse_mV)] + [
         (c.cause, c.heldout_rmse_mV) for c in diag.candidates if c.applicable and math.isfinite(c.heldout_rmse_mV)]
     fig = _figure((8, 0.45 * len(rows) + 1.2))
@@ -118,7 +123,7 @@ def plot_candidates(diag, path: Path) -> Path:
     return path
 
 
-def write_report(diag, out_dir: str | Path, command: str = "") -> Path:
+def write_report(diag: Diagnosis, out_dir: str | Path, command: str = "") -> Path:
     """Write ``report.md`` and its figures into ``out_dir``; returns the Markdown path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -174,7 +179,7 @@ def write_report(diag, out_dir: str | Path, command: str = "") -> Path:
     return path
 
 
-def _reference_lines(ref) -> list[str]:
+def _reference_lines(ref: ReferenceFit) -> list[str]:
     per = ", ".join(f"{r:.1f}" for r in getattr(ref, "rmse_mV_per_recording", []))
     lines = ["## Reference fit", "",
              f"Identification (`fit --method identify`) on the {getattr(ref, 'simulator', 'engine')} simulator: RMSE "
@@ -189,7 +194,7 @@ def _reference_lines(ref) -> list[str]:
     return lines
 
 
-def _write_not_judged(diag, out: Path, command: str) -> Path:
+def _write_not_judged(diag: Diagnosis, out: Path, command: str) -> Path:
     """``report.md`` of a diagnosis that refused to judge (reference fit too poor): the figure and what to do."""
     lines = [f"# Diagnosis of `{diag.params.name}`", ""]
     if command:

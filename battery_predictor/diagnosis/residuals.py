@@ -27,11 +27,18 @@ evidence text says so.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from battery_predictor.diagnosis.candidates import candidate
+
+if TYPE_CHECKING:
+    from battery_predictor.diagnosis.engine import Engine, Observed
+    from battery_predictor.diagnosis.results import CandidateResult
+    from battery_predictor.params import PackParams
 from battery_predictor.diagnosis.decision import (
     BASELINE_FLOOR_FACTOR,
     GAIN_THRESHOLD_PCT,
@@ -115,7 +122,7 @@ def direction_of_recent_current(t: np.ndarray, charge_ah: np.ndarray, capacity_a
     return np.where(dq > band, 1.0, np.where(dq < -band, -1.0, 0.0))
 
 
-def pack_capacity_ah(engine, params) -> float:
+def pack_capacity_ah(engine: Engine, params: PackParams) -> float:
     """Capacity (Ah) between 0 and 100 % SOC of the pack (negative electrode window)."""
     pv = params.parameter_values()
     x0, x100, _, _ = engine.stoichiometry_window(params)
@@ -124,14 +131,16 @@ def pack_capacity_ah(engine, params) -> float:
     return abs(x100 - x0) * n_n * area * 96485.33212 / 3600.0 * params.parallel
 
 
-def analyse_residuals(engine, params, observed, base) -> ResidualAnalysis:
+def analyse_residuals(engine: Engine, params: PackParams, observed: Sequence[Observed],
+                      base: CandidateResult) -> ResidualAnalysis:
     """Residual of the baseline refit ``base`` on ``observed`` against the features."""
     capacity = pack_capacity_ah(engine, params)
     feats: dict[str, list[np.ndarray]] = {f: [] for f in FEATURES}
     resid = []
     series = []
-    has_temp = all(o.temperature_k is not None for o in observed) and any(
-        float(np.ptp(o.temperature_k)) > 0.5 for o in observed)
+    temps = [o.temperature_k for o in observed]
+    has_temp = all(t is not None for t in temps) and any(
+        float(np.ptp(t)) > 0.5 for t in temps if t is not None)
     for obs, sim, soc0 in zip(observed, base.sims, base.socs):
         n = int(np.searchsorted(obs.t, sim.t[-1], side="right")) if sim.t.size else 0
         if n < 3:
@@ -180,7 +189,8 @@ TEMPERATURE_CAVEAT_K = 5.0
 CAPACITY_LIKE = ("current_offset", "capacity_fade")
 
 
-def evidence_text(cause: str, base, best, results, analysis: ResidualAnalysis, noise_mv: float,
+def evidence_text(cause: str, base: CandidateResult, best: CandidateResult | None, results: Sequence[CandidateResult],
+                  analysis: ResidualAnalysis, noise_mv: float,
                   close: list[str], floor_mv: float | None = None, temperature_shift_k: float | None = None) -> str:
     """One paragraph: the baseline's error, the residual features that carry it, the verdict.
 

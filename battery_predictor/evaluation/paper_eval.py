@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,6 +26,10 @@ from battery_predictor.fitting.space import fit_space
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording
 from battery_predictor.simulation import get_simulator
+
+if TYPE_CHECKING:
+    from battery_predictor.prediction.core import PredictorCore
+    from battery_predictor.simulation.base import PackSimResult
 
 #: The paper's figures, printed beside ours.
 PAPER: dict[str, Any] = {
@@ -50,11 +54,11 @@ class FitValidation:
     val_r2_mod: float
     parameters: tuple[str, ...]
     params: PackParams = field(repr=False)
-    opt_result: object = field(repr=False, default=None)
-    val_result: object = field(repr=False, default=None)
+    opt_result: PackSimResult | None = field(repr=False, default=None)
+    val_result: PackSimResult | None = field(repr=False, default=None)
 
 
-def score_fit(params: PackParams, rec: Recording):
+def score_fit(params: PackParams, rec: Recording) -> tuple[float, PackSimResult]:
     """R2_mod of ``params`` on ``rec`` (fast simulator, the params' initial state) and the simulation."""
     sim = get_simulator("fast")
     res = sim.simulate(params, request_for_recording(params, rec, initial_state="params",
@@ -78,7 +82,8 @@ def fit_pack(params: PackParams, recs: Sequence[Recording], *, trials: int, seed
 
 
 def table2(start: PackParams, dynamic: Recording, static: Recording, *, base_sets: Sequence[str], trials: int,
-           seed: int = 0, progress=None, storage: str | None = None, workers: int = 1) -> list[FitValidation]:
+           seed: int = 0, progress: Callable[[str], None] | None = None, storage: str | None = None,
+           workers: int = 1) -> list[FitValidation]:
     """Fit on the dynamic discharge and validate on the static one, and vice versa, per base set.
 
     With an Optuna ``storage`` every fit is a stored study: a stopped evaluation resumes them.
@@ -137,7 +142,7 @@ def actual_runtime_s(rec: Recording, cutoff_v: float) -> float:
     return float(rec.relative_time_s[below[0]])
 
 
-def runtime_evaluation(params: PackParams, recs: Sequence[Recording], *, checkpoints_s=CHECKPOINTS_S,
+def runtime_evaluation(params: PackParams, recs: Sequence[Recording], *, checkpoints_s: Sequence[float] = CHECKPOINTS_S,
                        cutoff_v: float | None = None, peak_current_quantile: float = 0.0,
                        load_model: str = "current") -> list[RuntimePoint]:
     """The predictor's strategy after 30, 60, ... min of each recording vs the actual remaining runtime.
@@ -319,7 +324,7 @@ def route_evaluation(params: PackParams, recs: Sequence[Recording],
 class _Feeder:
     """Feeds a recording's samples into a PredictorCore up to a time, like the monitor would."""
 
-    def __init__(self, core, rec: Recording) -> None:
+    def __init__(self, core: PredictorCore, rec: Recording) -> None:
         self.core, self.rec, self.k = core, rec, 0
         self.t = rec.relative_time_s
         self.temp = rec.temperature_k if rec.temperature_k is not None else np.full(self.t.size, math.nan)

@@ -4,25 +4,33 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from matplotlib.figure import Figure
 
 from battery_predictor.evaluation.paper_eval import PAPER
 from battery_predictor.jsonutil import json_default
 
+if TYPE_CHECKING:
+    from battery_predictor.evaluation.paper_eval import FitValidation, RouteCase, RuntimePoint
+    from battery_predictor.recording import Recording
+    from battery_predictor.simulation.base import PackSimResult
 
-def _fmt(x, nd=2) -> str:
+
+def _fmt(x: float | None, nd: int = 2) -> str:
     return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
 
 
-def fig_fit(rows, dynamic, static, out: Path, base: str = "Chen2020") -> Path | None:
+def fig_fit(rows: Sequence[FitValidation], dynamic: Recording, static: Recording, out: Path,
+            base: str = "Chen2020") -> Path | None:
     """Fig. 4 kind: measured vs simulated on both profiles for the model fitted on the dynamic one."""
     row = next((r for r in rows if r.base_parameter_set == base and r.opt_profile == "dynamic"
                 and r.opt_result is not None), None)
     if row is None:
         return None
+    assert row.opt_result is not None and row.val_result is not None  # table2 sets both or neither
     fig = Figure(figsize=(11, 3.6))
     axes = fig.subplots(1, 2)
     for ax, (label, res, rec, score) in zip(axes, (("dynamic (fit)", row.opt_result, dynamic, row.opt_r2_mod),
@@ -42,7 +50,7 @@ def fig_fit(rows, dynamic, static, out: Path, base: str = "Chen2020") -> Path | 
     return out
 
 
-def fig_runtime(points, out: Path) -> Path:
+def fig_runtime(points: Sequence[RuntimePoint], out: Path) -> Path:
     """Fig. 5 kind: predicted vs actual remaining runtime per pack at each checkpoint."""
     fig = Figure(figsize=(8, 4))
     ax = fig.subplots()
@@ -63,7 +71,7 @@ def fig_runtime(points, out: Path) -> Path:
     return out
 
 
-def fig_stepwise(rec, res, score: float, out: Path) -> Path:
+def fig_stepwise(rec: Recording, res: PackSimResult, score: float, out: Path) -> Path:
     """Fig. 7 kind: luggage robot stepwise experiment, measured vs fitted model."""
     fig = Figure(figsize=(9, 3.6))
     ax = fig.subplots()
@@ -80,7 +88,7 @@ def fig_stepwise(rec, res, score: float, out: Path) -> Path:
     return out
 
 
-def fig_routes(cases, threshold_v: float, out: Path) -> Path:
+def fig_routes(cases: Sequence[RouteCase], threshold_v: float, out: Path) -> Path:
     """Fig. 8 kind: predicted vs recorded voltage at 1.70 A after cycle 1 and 2, per payload."""
     fig = Figure(figsize=(8, 4))
     ax = fig.subplots()

@@ -26,8 +26,9 @@ counter assumes the discharge started full.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,6 +38,9 @@ from battery_predictor.params import PackParams
 from battery_predictor.prediction.core import PredictorConfig, PredictorCore
 from battery_predictor.recording import Recording
 from battery_predictor.replay.truth import RuntimeTruth
+
+if TYPE_CHECKING:
+    from battery_predictor.prediction.uncertainty import Spread
 
 #: Default checkpoints: 10 %, 20 %, ..., 90 % of the discharge.
 DEFAULT_CHECKPOINTS = tuple(round(0.1 * k, 1) for k in range(1, 10))
@@ -196,7 +200,7 @@ def evaluate_recording(params: PackParams, rec: Recording, *, cutoff_v: float, c
     return RecordingResult(str(rec.source), discharge, mean_c, results)
 
 
-def _spread_parts(spread) -> dict[str, list[float]]:
+def _spread_parts(spread: Spread | None) -> dict[str, list[float]]:
     if spread is None:
         return {}
     return {k: [spread.lower.get(k, 0.0), spread.upper.get(k, 0.0)] for k in {**spread.lower, **spread.upper}}
@@ -310,15 +314,17 @@ def with_runtime_sigma(params: PackParams, results: Sequence[RecordingResult], c
 def summarise(results: Sequence[RecordingResult], counters: Sequence[str], *, late_after: float = 0.3) -> dict:
     """Per recording and pooled figures of the predictor and each counter (see :func:`error_summary`)."""
 
-    def figures(checkpoints: list[CheckpointResult], pick) -> dict[str, float]:
+    def figures(checkpoints: list[CheckpointResult], pick: Callable[[CheckpointResult], float]) -> dict[str, float]:
         pairs = [(pick(c), c.true_remaining_s) for c in checkpoints]
         late = [(pick(c), c.true_remaining_s) for c in checkpoints if c.fraction >= late_after]
         return error_summary(pairs, late_fraction_pairs=late)
 
+    def counter(name: str) -> Callable[[CheckpointResult], float]:
+        return lambda c: c.counters_s.get(name, math.nan)
+
     def block(checkpoints: list[CheckpointResult]) -> dict:
         return {"predictor": figures(checkpoints, lambda c: c.predicted_s if c.valid else math.nan),
-                **{f"counter[{n}]": figures(checkpoints, lambda c, n=n: c.counters_s.get(n, math.nan))
-                   for n in counters}}
+                **{f"counter[{n}]": figures(checkpoints, counter(n)) for n in counters}}
 
     every = [c for r in results for c in r.checkpoints]
     return {

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 
 @dataclass(frozen=True)
@@ -27,7 +28,8 @@ class AlignedSignals:
     u_min_v: float
 
 
-def align_for_r2_mod(measured_time_s, measured_v, predicted_time_s, predicted_v) -> AlignedSignals:
+def align_for_r2_mod(measured_time_s: npt.ArrayLike, measured_v: npt.ArrayLike, predicted_time_s: npt.ArrayLike,
+                     predicted_v: npt.ArrayLike) -> AlignedSignals:
     """Truncate, extend and interpolate as Eq. (1) and (2) of the seed paper.
 
     1. ``U_min = min_i U_i``; the prediction is truncated where it first falls below ``U_min``
@@ -69,7 +71,8 @@ def align_for_r2_mod(measured_time_s, measured_v, predicted_time_s, predicted_v)
     return AlignedSignals(time_s=t, measured_v=u, predicted_v=pred, u_min_v=u_min)
 
 
-def r2_mod(measured_time_s, measured_v, predicted_time_s, predicted_v) -> float:
+def r2_mod(measured_time_s: npt.ArrayLike, measured_v: npt.ArrayLike, predicted_time_s: npt.ArrayLike,
+           predicted_v: npt.ArrayLike) -> float:
     """Modified R2 (Eq. 3) of a predicted against a measured voltage curve.
 
     ``R2_mod = 1 - sum (U_i - U~_i)^2 / sum (U_i - mean U)^2`` on the grid of
@@ -83,7 +86,8 @@ def r2_mod(measured_time_s, measured_v, predicted_time_s, predicted_v) -> float:
     return 1.0 - ss_res / ss_tot
 
 
-def rmse_v(measured_time_s, measured_v, predicted_time_s, predicted_v) -> float:
+def rmse_v(measured_time_s: npt.ArrayLike, measured_v: npt.ArrayLike, predicted_time_s: npt.ArrayLike,
+           predicted_v: npt.ArrayLike) -> float:
     """Root-mean-square voltage error in V over the overlap of both signals (no padding)."""
     t = np.asarray(measured_time_s, dtype=float)
     u = np.asarray(measured_v, dtype=float)

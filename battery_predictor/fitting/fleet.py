@@ -25,6 +25,7 @@ from battery_predictor.fitting.problem import FitProblem
 from battery_predictor.fitting.space import fit_space
 from battery_predictor.params import PackParams
 from battery_predictor.processes import resident_mb
+from battery_predictor.simulation.base import PackSimulator
 
 #: Pack names become file and study names.
 PACK_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
@@ -111,7 +112,7 @@ def parse_packs(data: Sequence[str] = (), packs: Sequence[str] = ()) -> dict[str
 
 
 def fit_fleet(params: PackParams, packs: Mapping[str, Sequence[str]], load: Callable[[Sequence[str]], list], *,
-              storage: str | None, out_dir: Path, trials: int, seed: int = 0, simulator=None,
+              storage: str | None, out_dir: Path, trials: int, seed: int = 0, simulator: PackSimulator | None = None,
               parameters: Sequence[str] | None = None, study_prefix: str | None = None,
               on_pack: Callable[[PackFit], None] | None = None) -> list[PackFit]:
     """Fit every pack (one study each in ``storage``) and write ``out_dir/<pack>.yaml``.

@@ -16,6 +16,7 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,6 +26,13 @@ from battery_predictor.fitting.identifiable import Coordinate, electrode_basis, 
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording
 from battery_predictor.simulation.base import PackSimResult, PackSimulator
+
+if TYPE_CHECKING:
+    import optuna
+
+    from battery_predictor.fitting.identifiability import IdentifiabilityReport
+    from battery_predictor.fitting.problem import FitProblem
+    from battery_predictor.fitting.space import FitParameter
 
 #: Share of the evaluation budget spent in TPE (the rest refines).
 DEFAULT_TPE_FRACTION = 0.25
@@ -287,7 +295,7 @@ def _cost_function(problem: IdentificationProblem, log: EvaluationLog) -> Callab
     return residual
 
 
-def _run_tpe(problem: IdentificationProblem, residual, n_trials: int, seed: int, start_unit: np.ndarray,
+def _run_tpe(problem: IdentificationProblem, residual: Callable[[np.ndarray], np.ndarray], n_trials: int, seed: int, start_unit: np.ndarray,
              startup_per_coordinate: int) -> list[tuple[float, np.ndarray]]:
     """TPE on the unit cube; returns ``(cost, unit)`` of every completed trial."""
     import optuna
@@ -301,7 +309,7 @@ def _run_tpe(problem: IdentificationProblem, residual, n_trials: int, seed: int,
     study.enqueue_trial({f"u{i}": float(u) for i, u in enumerate(start_unit)})
     done: list[tuple[float, np.ndarray]] = []
 
-    def objective(trial) -> float:
+    def objective(trial: optuna.Trial) -> float:
         unit = np.array([trial.suggest_float(f"u{i}", 0.0, 1.0) for i in range(len(problem.space))])
         r = residual(unit)
         done.append((float(r @ r), unit))
@@ -328,7 +336,7 @@ def distinct_best(candidates: list[tuple[float, np.ndarray]], count: int,
     return picked
 
 
-def _fd_jacobian(residual, unit: np.ndarray, step: float = FD_STEP) -> np.ndarray:
+def _fd_jacobian(residual: Callable[[np.ndarray], np.ndarray], unit: np.ndarray, step: float = FD_STEP) -> np.ndarray:
     """Forward differences on the unit cube (backward at the upper bound)."""
     f0 = residual(unit)
     jac = np.empty((f0.size, unit.size))
@@ -340,7 +348,7 @@ def _fd_jacobian(residual, unit: np.ndarray, step: float = FD_STEP) -> np.ndarra
     return jac
 
 
-def _refine(residual, start: np.ndarray, max_evaluations: int) -> float:
+def _refine(residual: Callable[[np.ndarray], np.ndarray], start: np.ndarray, max_evaluations: int) -> float:
     """Trust-region reflective least squares from ``start``; returns the lowest cost it reached.
 
     The evaluation log keeps the best point across all refinements.
@@ -442,7 +450,7 @@ __all__ = ["IdentificationProblem", "IdentificationResult", "identify", "identif
            "distinct_best", "ResidualGrid", "CandidateScore"]
 
 
-def identifiability_of(problem: IdentificationProblem, unit: np.ndarray):
+def identifiability_of(problem: IdentificationProblem, unit: np.ndarray) -> IdentifiabilityReport:
     """:class:`~battery_predictor.fitting.identifiability.IdentifiabilityReport` at ``unit`` (n + 1 evaluations)."""
     from battery_predictor.fitting.identifiability import analyse, theta_jacobian
 
@@ -453,7 +461,8 @@ def identifiability_of(problem: IdentificationProblem, unit: np.ndarray):
                    theta_jacobian(jac_unit, spans), [(c.low, c.high) for c in problem.space])
 
 
-def raw_identifiability(problem, space, values: dict[str, float], relative_step: float = 1e-3):
+def raw_identifiability(problem: FitProblem, space: Sequence[FitParameter], values: dict[str, float],
+                        relative_step: float = 1e-3) -> IdentifiabilityReport:
     """Identifiability of the raw parameters of the paper's fit (``fit --method tpe``) at ``values``.
 
     ``theta = ln(value)`` for every parameter (intervals are relative), with forward differences of
@@ -466,6 +475,7 @@ def raw_identifiability(problem, space, values: dict[str, float], relative_step:
     grids = [ResidualGrid.for_recording(r, problem.extend_fraction * r.duration_s, n_rec) for r in problem.recordings]
 
     def residuals(vals: dict[str, float]) -> np.ndarray:
+        results: Sequence[PackSimResult | None]
         try:
             results = problem.evaluate(vals).results
         except SimulationError:

@@ -18,7 +18,9 @@ measures the full cell's OCV against the charge drawn:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +29,9 @@ from battery_predictor.fitting.identifiable import FARADAY_C_MOL, ocp_curves, st
 from battery_predictor.ocp import CONSTANT_KEY, PREFIX, SLOPE_KEY, evaluate
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording
+
+if TYPE_CHECKING:
+    import pybamm
 
 #: A test is "low rate" when its discharge current is at most this C-rate.
 MAX_C_RATE = 0.1
@@ -142,7 +147,8 @@ def pseudo_ocv(recording: Recording, nominal_capacity_ah: float, *, parallel: in
     return _mean_of_branches(recording.source, soc, v_dis, t, cur, volt, d1, capacity, i_dis, notes)
 
 
-def _discharge_branch(soc, v_dis, volt, cur, d0: int, capacity: float, i_dis: float, notes: list[str]) -> OcvCurve:
+def _discharge_branch(soc: np.ndarray, v_dis: np.ndarray, volt: np.ndarray, cur: np.ndarray, d0: int, capacity: float,
+                      i_dis: float, notes: list[str]) -> OcvCurve:
     """The discharge branch raised by the step between the rest before it and its first sample."""
     rest = d0 > 0 and abs(float(cur[d0 - 1])) < 0.05 * i_dis
     step_v = float(volt[d0 - 1] - volt[d0]) if rest else 0.0
@@ -154,8 +160,8 @@ def _discharge_branch(soc, v_dis, volt, cur, d0: int, capacity: float, i_dis: fl
     return OcvCurve(soc, v_dis + step_v, capacity, i_dis, "discharge branch", notes)
 
 
-def _mean_of_branches(source: str, soc, v_dis, t, cur, volt, d1: int, capacity: float, i_dis: float,
-                      notes: list[str]) -> OcvCurve:
+def _mean_of_branches(source: str, soc: np.ndarray, v_dis: np.ndarray, t: np.ndarray, cur: np.ndarray,
+                      volt: np.ndarray, d1: int, capacity: float, i_dis: float, notes: list[str]) -> OcvCurve:
     """Mean of the discharge and the following charge branch (half their gap added to the discharge)."""
     scale = max(float(np.max(np.abs(cur))), 1e-9)
     ch_runs = [r for r in _runs(cur < -0.2 * scale) if r[0] >= d1 and r[1] - r[0] >= 3]
@@ -311,7 +317,8 @@ def positive_ocp_values(params: PackParams, curve: OcvCurve, *, terms: int = DEF
     return PositiveOcpFit(values, manual, rms, worst, (x0, x100, y100, y0))
 
 
-def _lowest_monotone_x0(target, measured: np.ndarray, x0_low: float, x100: float) -> float:
+def _lowest_monotone_x0(target: Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]], measured: np.ndarray,
+                        x0_low: float, x100: float) -> float:
     """Lowest ``x_0`` (from ``x0_low`` up, steps of 0.0025) whose implied positive OCP decreases."""
     for x0 in np.arange(x0_low, x100 - 0.3, 0.0025):
         _, y, u_p = target(float(x0))
@@ -322,7 +329,7 @@ def _lowest_monotone_x0(target, measured: np.ndarray, x0_low: float, x100: float
                       "negative OCP; the curve is not a low-rate OCV of this cell type")
 
 
-def _window_capacity_ah(pv, x0: float, x100: float) -> float:
+def _window_capacity_ah(pv: pybamm.ParameterValues, x0: float, x100: float) -> float:
     """Cell capacity (Ah) between the negative stoichiometries ``x0`` and ``x100``."""
     volume = (float(pv["Electrode height [m]"]) * float(pv["Electrode width [m]"])
               * float(pv["Negative electrode thickness [m]"])

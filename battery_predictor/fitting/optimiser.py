@@ -19,12 +19,21 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 from battery_predictor.errors import BatteryPredictorError, SimulationError
 from battery_predictor.fitting.problem import FitProblem
 from battery_predictor.fitting.space import FitParameter
 from battery_predictor.fitting.storage import close_storage, open_storage, redacted, worker_id
 from battery_predictor.processes import ProcessPool, shared
+
+if TYPE_CHECKING:
+    import optuna
+    from optuna import Study
+    from optuna.samplers import BaseSampler
+    from optuna.storages import BaseStorage
+    from optuna.trial import FrozenTrial
 
 #: Startup (random) trials per searched parameter, as in the seed paper.
 STARTUP_TRIALS_PER_PARAMETER = 20
@@ -106,10 +115,10 @@ def resumed_study_message(study_name: str, storage: str | None, done: int, n_tri
             f"To start afresh, {afresh}.")
 
 
-def _objective_factory(problem: FitProblem, space: Sequence[FitParameter]):
+def _objective_factory(problem: FitProblem, space: Sequence[FitParameter]) -> Callable[[optuna.Trial], float]:
     worker = worker_id()
 
-    def objective(trial) -> float:
+    def objective(trial: optuna.Trial) -> float:
         values = {p.name: trial.suggest_float(p.name, p.low, p.high, log=p.log) for p in space}
         import optuna
 
@@ -128,7 +137,7 @@ def _objective_factory(problem: FitProblem, space: Sequence[FitParameter]):
     return objective
 
 
-def _worker(storage: str, study_name: str, problem: FitProblem, space, seed: int, n_startup: int,
+def _worker(storage: str, study_name: str, problem: FitProblem, space: Sequence[FitParameter], seed: int, n_startup: int,
             n_trials_total: int) -> None:
     """Child-process worker: runs trials until the study holds ``n_trials_total``."""
     import optuna
@@ -139,7 +148,7 @@ def _worker(storage: str, study_name: str, problem: FitProblem, space, seed: int
     rdb = open_storage(storage)
     study = optuna.load_study(study_name=study_name, storage=rdb, sampler=sampler)
 
-    def stop_when_done(study, _trial) -> None:
+    def stop_when_done(study: optuna.Study, _trial: optuna.trial.FrozenTrial) -> None:
         states = (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED)
         if len(study.get_trials(deepcopy=False, states=states)) >= n_trials_total:
             study.stop()
@@ -213,7 +222,7 @@ class TPEOptimiser:
         finally:
             close_storage(storage)
 
-    def _run(self, optuna, storage, sampler, name: str, n_startup: int, problem: FitProblem,
+    def _run(self, optuna: ModuleType, storage: BaseStorage | None, sampler: BaseSampler, name: str, n_startup: int, problem: FitProblem,
              space: Sequence[FitParameter], tic: float) -> FitResult:
         from optuna.trial import TrialState
 
@@ -237,7 +246,7 @@ class TPEOptimiser:
             bar = tqdm(total=self.n_trials, initial=done, desc="fit", unit="trial", file=sys.stderr,
                        dynamic_ncols=True)
 
-        def on_trial(study, _trial) -> None:
+        def on_trial(study: Study, _trial: FrozenTrial) -> None:
             n = len(study.get_trials(deepcopy=False, states=finished_states))
             if bar is not None:
                 bar.n = min(n, self.n_trials)

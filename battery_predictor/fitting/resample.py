@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 from battery_predictor.errors import InputDataError
@@ -68,7 +70,7 @@ def resample_windows(rec: Recording, window_s: float) -> Recording:
     )
 
 
-def resample_all(recordings, window_s: float | None) -> list[Recording]:
+def resample_all(recordings: Iterable[Recording], window_s: float | None) -> list[Recording]:
     """:func:`resample_windows` on every recording; ``None`` keeps them unchanged."""
     if window_s is None:
         return list(recordings)

@@ -10,14 +10,18 @@ more than 1 % or the R2 falls below 0.99.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.fitting.cost import r2_mod
 from battery_predictor.params import INTERCONNECT_KEYS, PackParams
 from battery_predictor.simulation.base import PackSimulator, SimulationRequest
 from battery_predictor.simulation.load import StepLoad
+
+if TYPE_CHECKING:
+    import numpy as np
 
 #: Relative raise of each parameter.
 RAISE_FRACTION = 0.10
@@ -86,7 +90,8 @@ def screening_load(params: PackParams, c_rate: float | None = None) -> StepLoad:
 
 
 def screen(params: PackParams, simulator: PackSimulator, names: Iterable[str] | None = None,
-           c_rate: float | None = None, progress=None) -> list[ScreeningRow]:
+           c_rate: float | None = None,
+           progress: Callable[[ScreeningRow], None] | None = None) -> list[ScreeningRow]:
     """Raise each parameter by 10 % and rank them by effect (most relevant first).
 
     Parameters
@@ -135,7 +140,7 @@ def screen(params: PackParams, simulator: PackSimulator, names: Iterable[str] | 
 
 def rank(rows: Iterable[ScreeningRow]) -> list[ScreeningRow]:
     """Relevant first, then by |runtime change| and 1 - R2 (failed raises first among relevant)."""
-    def key(r: ScreeningRow):
+    def key(r: ScreeningRow) -> tuple[bool, float]:
         rt = abs(r.runtime_change_pct) if math.isfinite(r.runtime_change_pct) else math.inf
         r2 = (1.0 - r.r2) if math.isfinite(r.r2) else math.inf
         return (not r.relevant, -max(rt / RUNTIME_CHANGE_THRESHOLD_PCT, r2 / (1 - R2_THRESHOLD)))
@@ -148,7 +153,7 @@ def relevant_names(rows: Iterable[ScreeningRow]) -> list[str]:
     return [r.name for r in rows if r.relevant and not r.error]
 
 
-def _grid(end_s: float, step_s: float = 30.0):
+def _grid(end_s: float, step_s: float = 30.0) -> np.ndarray:
     import numpy as np
 
     return np.arange(0.0, end_s, step_s)

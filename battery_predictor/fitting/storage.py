@@ -13,9 +13,12 @@ from __future__ import annotations
 import os
 import socket
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, overload
 
 from battery_predictor.errors import BatteryPredictorError
+
+if TYPE_CHECKING:
+    import optuna
 
 #: Attempts to open a storage: two processes creating the tables of a new database at once can
 #: collide (PostgreSQL: duplicate key in pg_type); the loser retries after a short pause.
@@ -34,7 +37,11 @@ def redacted(url: str) -> str:
     return f"{scheme}://{user}{':***' if ':' in credentials else ''}@{host}"
 
 
-def open_storage(url: str | None):
+@overload
+def open_storage(url: str) -> optuna.storages.RDBStorage: ...
+@overload
+def open_storage(url: None) -> None: ...
+def open_storage(url: str | None) -> optuna.storages.RDBStorage | None:
     """The Optuna storage for ``url`` (None: in memory).
 
     Parameters
@@ -80,7 +87,7 @@ def open_storage(url: str | None):
     raise AssertionError("unreachable")
 
 
-def close_storage(storage) -> None:
+def close_storage(storage: optuna.storages.BaseStorage | None) -> None:
     """Give the storage's database connections back (no-op for None or in-memory storages)."""
     engine = getattr(storage, "engine", None)
     if engine is not None:

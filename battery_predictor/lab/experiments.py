@@ -41,9 +41,10 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor import __version__
 from battery_predictor.errors import BatteryPredictorError, SimulationError
@@ -53,6 +54,12 @@ from battery_predictor.lab.instruments import InstrumentSpec, measure
 from battery_predictor.lab.real_pack import SURFACE_18650_M2, SURFACE_32700_M2, RealPack, RealPackSpec
 from battery_predictor.processes import ProcessPool
 from battery_predictor.simulation.load import StepLoad
+
+if TYPE_CHECKING:
+    from battery_predictor.lab.real_pack import PackTrace
+    from battery_predictor.params import PackParams
+    from battery_predictor.profiles.load_profile import LoadProfile
+    from battery_predictor.recording import Recording
 
 #: liionpack step period of the real pack in s (= the averaging window, so windows and steps align).
 PERIOD_S = 5.0
@@ -173,7 +180,7 @@ def find_experiments(names: Iterable[str] | None) -> list[ExperimentSpec]:
     return out
 
 
-def load_robot_params(robot: str, params_dir: str | Path | None = None):
+def load_robot_params(robot: str, params_dir: str | Path | None = None) -> PackParams:
     """The params file of ``robot`` (``params/<robot>.yaml``)."""
     from battery_predictor.config import default_params_file
     from battery_predictor.params import load_params
@@ -187,7 +194,7 @@ def load_robot_params(robot: str, params_dir: str | Path | None = None):
 # ---------------------------------------------------------------------------
 
 
-def standstill_voltage_v(time_s, voltage_v, cycle_end_s: float, standstill_s: float = 60.0,
+def standstill_voltage_v(time_s: npt.ArrayLike, voltage_v: npt.ArrayLike, cycle_end_s: float, standstill_s: float = 60.0,
                          window_s: float = PERIOD_S) -> float:
     """Mean voltage (V) over the samples whose 5 s window lies within the standstill ending at ``cycle_end_s``.
 
@@ -256,10 +263,11 @@ def bisect_initial_soc(end_voltage: Callable[[float], float], target_v: float, *
 
 
 
-def _profile_record(profile, end_s: float | None = None) -> dict[str, Any]:
+def _profile_record(profile: LoadProfile, end_s: float | None = None) -> dict[str, Any]:
     """The curve points actually applied (up to ``end_s``), for the bag metadata."""
     d = np.asarray(profile.duration_s, dtype=float)
     c = np.asarray(profile.current_a, dtype=float)
+    assert profile.labels is not None  # LoadProfile fills in the labels it was not given
     labels = list(profile.labels)
     if end_s is not None:
         starts = np.concatenate([[0.0], np.cumsum(d)[:-1]])
@@ -306,7 +314,7 @@ def _base_metadata(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentS
     }
 
 
-def _thermal_summary(trace, end_s: float) -> dict[str, float]:
+def _thermal_summary(trace: PackTrace, end_s: float) -> dict[str, float]:
     keep = trace.time_s < end_s
     return {
         "ambient_temperature_k": trace.ambient_temperature_k,
@@ -320,8 +328,8 @@ def _thermal_summary(trace, end_s: float) -> dict[str, float]:
 # ---------------------------------------------------------------------------
 
 
-def _run_to_stop_voltage(exp: ExperimentSpec, pack: RealPack, profile, stop_v: float, instruments: InstrumentSpec,
-                         initial_state: str) -> tuple[Any, dict[str, Any]]:
+def _run_to_stop_voltage(exp: ExperimentSpec, pack: RealPack, profile: LoadProfile, stop_v: float,
+                         instruments: InstrumentSpec, initial_state: str) -> tuple[Recording, dict[str, Any]]:
     """Discharge until ``stop_v`` is measured; returns the recording and metadata."""
     load = StepLoad.from_profile(profile)
     # the simulation runs until a step voltage is STOP_MARGIN_V below the end voltage (plus one step), so the
@@ -354,7 +362,7 @@ def _run_to_stop_voltage(exp: ExperimentSpec, pack: RealPack, profile, stop_v: f
     return rec, meta
 
 
-def run_static(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec):
+def run_static(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec) -> tuple[Recording, dict[str, Any]]:
     """Temi static discharge at 0.5 C until 12.00 V (5.1.4)."""
     from battery_predictor.profiles import constant_current_profile
 
@@ -365,7 +373,7 @@ def run_static(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec)
     return _run_to_stop_voltage(exp, pack, profile, stop_v, instruments, "params initial concentrations (charged)")
 
 
-def run_dynamic(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec):
+def run_dynamic(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec) -> tuple[Recording, dict[str, Any]]:
     """Temi usage profile until 13.30 V (5.1.4, 5.1.6)."""
     from battery_predictor.profiles import generate_usage_profile, load_usage_config
 
@@ -375,7 +383,8 @@ def run_dynamic(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec
     return _run_to_stop_voltage(exp, pack, profile, stop_v, instruments, "params initial concentrations (charged)")
 
 
-def run_stepwise(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec):
+def run_stepwise(exp: ExperimentSpec, pack: RealPack,
+                 instruments: InstrumentSpec) -> tuple[Recording, dict[str, Any]]:
     """Ranger stepwise experiment until 45.00 V (5.2.2)."""
     from battery_predictor.profiles import stepwise_profile
 
@@ -385,7 +394,7 @@ def run_stepwise(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpe
                                 "params initial concentrations (charged)")
 
 
-def run_route(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec):
+def run_route(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec) -> tuple[Recording, dict[str, Any]]:
     """Ranger longest route twice in succession, ending just above 46.31 V at 1.70 A (5.2.4)."""
     from battery_predictor.profiles import load_ranger_currents, longest_route, route_profile
     from battery_predictor.simulation.base import SimulationRequest

@@ -43,12 +43,16 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.recording import Recording
+
+if TYPE_CHECKING:
+    from battery_predictor.lab.real_pack import PackTrace
 
 #: Minimum current change (A) between steps used to estimate the pack resistance.
 _MIN_STEP_A = 0.3
@@ -138,7 +142,7 @@ class Measurement:
     acquisition_end_s: float
 
 
-def quantise(values, resolution: float) -> np.ndarray:
+def quantise(values: npt.ArrayLike, resolution: float) -> np.ndarray:
     """Round ``values`` to the nearest multiple of ``resolution``."""
     if not resolution > 0:
         raise ValueError(f"resolution must be > 0, got {resolution}")
@@ -146,7 +150,8 @@ def quantise(values, resolution: float) -> np.ndarray:
     return np.round(arr / resolution) * resolution
 
 
-def pack_resistance_ohm(time_s, current_a, voltage_v, default_ohm: float = 0.0) -> float:
+def pack_resistance_ohm(time_s: npt.ArrayLike, current_a: npt.ArrayLike, voltage_v: npt.ArrayLike,
+                        default_ohm: float = 0.0) -> float:
     """Pack small-signal resistance (Ohm) from the voltage jumps at current steps of a stepped trace.
 
     The median of ``-dV / dI`` over consecutive steps whose current changes by
@@ -164,7 +169,8 @@ def pack_resistance_ohm(time_s, current_a, voltage_v, default_ohm: float = 0.0) 
     return float(np.median(r)) if r.size else float(default_ohm)
 
 
-def sample_trace(trace, spec: InstrumentSpec, rng: np.random.Generator, *, end_s: float | None = None) -> RawSamples:
+def sample_trace(trace: PackTrace, spec: InstrumentSpec, rng: np.random.Generator, *,
+                 end_s: float | None = None) -> RawSamples:
     """10 Hz noisy, quantised samples of a :class:`~battery_predictor.lab.real_pack.PackTrace`.
 
     Parameters
@@ -199,7 +205,8 @@ def sample_trace(trace, spec: InstrumentSpec, rng: np.random.Generator, *, end_s
     return RawSamples(t, v, i, temp, offset, r, v_true)
 
 
-def window_average(time_s, *columns, window_s: float = 5.0) -> tuple[np.ndarray, list[np.ndarray]]:
+def window_average(time_s: npt.ArrayLike, *columns: npt.ArrayLike,
+                   window_s: float = 5.0) -> tuple[np.ndarray, list[np.ndarray]]:
     """Time-window averaging: mean of every column over ``[j w, j w + w)``, labelled ``j w``.
 
     Empty windows are omitted; the last window may be partial.
@@ -227,7 +234,7 @@ def window_average(time_s, *columns, window_s: float = 5.0) -> tuple[np.ndarray,
     return starts, means
 
 
-def measure(trace, spec: InstrumentSpec | None = None, *, seed: int, stop_voltage_v: float | None = None,
+def measure(trace: PackTrace, spec: InstrumentSpec | None = None, *, seed: int, stop_voltage_v: float | None = None,
             end_s: float | None = None, source: str = "<lab>") -> Measurement:
     """A "measured" recording of ``trace``: 10 Hz acquisition, 5 s window means, stop rule.
 

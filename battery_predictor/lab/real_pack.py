@@ -356,10 +356,10 @@ class RealPack:
         temperature_k = float(ambient_temperature_k or params.ambient_temperature_k)
         state: dict[str, Any] = {"calls": 0, "trigger": None, "stopped": False}
 
-        def node_termination(netlist) -> Callable[[np.ndarray], bool]:
+        def node_termination(netlist: Any) -> Callable[[np.ndarray], bool]:
             node_a, node_b = pack_terminal_nodes(netlist)
 
-            def stop(v_node) -> bool:
+            def stop(v_node: np.ndarray) -> bool:
                 # liionpack calls this once per step with the node voltages under the step's current
                 state["calls"] += 1
                 if stop_pack_voltage_v is None:

@@ -52,7 +52,12 @@ snapshot (``stale=True``, last known values, no samples) is emitted.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 #: Why a sample can be rejected (keys of the rejection counters).
 REASONS = ("nan", "out_of_range", "out_of_order", "duplicate", "late", "future")
@@ -449,7 +454,8 @@ def _finite(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def monitor_windows(time_s, voltage_v, current_a, temperature_k=None,
+def monitor_windows(time_s: Sequence[float] | np.ndarray, voltage_v: Sequence[float] | np.ndarray,
+                    current_a: Sequence[float] | np.ndarray, temperature_k: Sequence[float] | np.ndarray | None = None,
                     config: MonitorConfig | None = None) -> list[PackSnapshot]:
     """The clean pack states a monitor publishes for a recorded series (offline, in time order).
 

@@ -16,12 +16,17 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import brentq
 
 from battery_predictor.errors import SimulationError
-from battery_predictor.prediction.cell_runner import PackRunner, RunState
+from battery_predictor.prediction.cell_runner import RunState
+
+if TYPE_CHECKING:
+    from battery_predictor.prediction.pack_model import PackModel
 
 _PAST_CUTOFF = -1e3
 
@@ -58,7 +63,8 @@ class Calibration:
         return self.state if self.state is not None else self.soc
 
 
-def _solve_monotone(f: Callable[[float], float], bounds: tuple[float, float], tol: float):
+def _solve_monotone(f: Callable[[float], float], bounds: tuple[float, float],
+                    tol: float) -> tuple[float, float, str]:
     """Root of an increasing ``f`` within ``bounds``; returns (x, f(x), clipped)."""
     lo, hi = bounds
     f_lo = f(lo)
@@ -82,13 +88,13 @@ def _check_finite(**values: float) -> None:
             raise SimulationError(f"cannot calibrate: {name} is not finite ({val})")
 
 
-def calibrate_soc(runner: PackRunner, voltage_v: float, current_a: float, temperature_k: float,
+def calibrate_soc(runner: PackModel, voltage_v: float, current_a: float, temperature_k: float,
                   settle_s: float = 60.0, tol_soc: float = 1e-4) -> Calibration:
     """SOC whose ``settle_s`` simulation at ``current_a`` ends at the measured ``voltage_v``.
 
     Parameters
     ----------
-    runner : PackRunner
+    runner : PackModel
         The pack model.
     voltage_v : float
         Measured pack voltage in V.
@@ -123,7 +129,8 @@ def calibrate_soc(runner: PackRunner, voltage_v: float, current_a: float, temper
     return Calibration(soc, res, clipped, state, res)
 
 
-def history_segments(time_s, current_a, max_segments: int = 24) -> list[tuple[float, float]]:
+def history_segments(time_s: npt.ArrayLike, current_a: npt.ArrayLike,
+                     max_segments: int = 24) -> list[tuple[float, float]]:
     """Charge-conserving constant-current segments (s, A) of a sampled current history.
 
     The current at ``time_s[k]`` holds until ``time_s[k + 1]``; the span is cut into at
@@ -142,7 +149,8 @@ def history_segments(time_s, current_a, max_segments: int = 24) -> list[tuple[fl
     return [(dur, float((cum[k + 1] - cum[k]) / dur)) for k in range(n)]
 
 
-def calibrate_on_history(runner: PackRunner, time_s, voltage_v, current_a, temperature_k: float, *,
+def calibrate_on_history(runner: PackModel, time_s: npt.ArrayLike, voltage_v: npt.ArrayLike, current_a: npt.ArrayLike,
+                         temperature_k: float, *,
                          window_s: float = 600.0, match_s: float = 120.0, max_segments: int = 12,
                          tol_soc: float = 5e-4) -> Calibration:
     """Calibrate on the last ``window_s`` of history; returns the present SOC and state.

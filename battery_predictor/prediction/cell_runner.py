@@ -25,8 +25,10 @@ resistance's Arrhenius factor follows the cell temperature at every sample.
 from __future__ import annotations
 
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -39,6 +41,11 @@ from battery_predictor.simulation.extensions import (
     weak_group_params,
 )
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+if TYPE_CHECKING:
+    import pybamm
+
+    from battery_predictor.params import PackParams
 
 _CURRENT = "Current function [A]"
 _C_N0 = "Initial concentration in negative electrode [mol.m-3]"
@@ -107,7 +114,7 @@ class SegmentRun:
     final_state: RunState | None = None
 
 
-def _build_simulation(params):
+def _build_simulation(params: PackParams) -> pybamm.Simulation:
     """A built PyBaMM simulation of one cell of ``params`` with current, concentrations and temperature as inputs."""
     import pybamm
 
@@ -124,7 +131,8 @@ def _build_simulation(params):
     return sim
 
 
-def _step(sim, solution, duration_s: float, inputs: dict, t_interp: np.ndarray):
+def _step(sim: pybamm.Simulation, solution: pybamm.Solution | None, duration_s: float, inputs: dict,
+          t_interp: np.ndarray) -> tuple[pybamm.Solution, np.ndarray, np.ndarray]:
     """Step ``sim`` by ``duration_s`` from ``solution``; returns (solution, time_s from the step's start, cell V)."""
     new = sim.step(duration_s, starting_solution=solution, inputs=inputs, save=False, t_interp=t_interp)
     time_s = np.asarray(new.t, dtype=float)
@@ -133,7 +141,7 @@ def _step(sim, solution, duration_s: float, inputs: dict, t_interp: np.ndarray):
     return new, time_s, cell_voltage_v
 
 
-def _stopped_early(solution, time_s: np.ndarray, duration_s: float) -> bool:
+def _stopped_early(solution: pybamm.Solution, time_s: np.ndarray, duration_s: float) -> bool:
     """True when a step ended at the cell's lower cut-off (or otherwise before ``duration_s``)."""
     return bool(solution.termination and "Minimum voltage" in str(solution.termination)
                 or time_s[-1] < duration_s - 1e-6)
@@ -152,7 +160,7 @@ class PackRunner:
         Maximum spacing of output samples in s.
     """
 
-    def __init__(self, params, samples_per_segment: int = 4, max_spacing_s: float = 30.0) -> None:
+    def __init__(self, params: PackParams, samples_per_segment: int = 4, max_spacing_s: float = 30.0) -> None:
         from dataclasses import replace
 
         self.params = params
@@ -227,7 +235,7 @@ class PackRunner:
         return (x0 + soc * (x100 - x0)) * c_n, (y0 - soc * (y0 - y100)) * c_p
 
     # ------------------------------------------------------------------- runs
-    def run(self, start: float | RunState, segments, temperature_k: float) -> SegmentRun:
+    def run(self, start: float | RunState, segments: Sequence[tuple[float, float]], temperature_k: float) -> SegmentRun:
         """Run ``segments`` = [(duration_s, pack_current_a), ...] at ``temperature_k``.
 
         ``start`` is a SOC (uniform, relaxed particles; with ``cell_imbalance`` both groups at
@@ -239,23 +247,7 @@ class PackRunner:
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
             raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
         weak_sim = self._weak_sim
-        if isinstance(start, RunState):
-            sol, soc_start, charge0 = start.solution, start.soc_start, start.charge_ah
-            sol_w = start.weak_solution
-            if weak_sim is not None and sol is not None and sol_w is None:
-                raise SimulationError("the state to continue from has no weak-group solution "
-                                      "(made by a runner without cell_imbalance?)")
-            base = dict(start.base_inputs)
-            base[_T_AMB] = float(temperature_k)
-        else:
-            soc = float(start)
-            lo, hi = self.soc_bounds
-            if not np.isfinite(soc) or not (lo - 1e-9 <= soc <= hi + 1e-9):
-                raise SimulationError(f"SOC must be within {lo:.3f}..{hi:.3f} for this model, got {soc}")
-            c_n0, c_p0 = self.concentrations(soc)
-            base = {_C_N0: c_n0, _C_P0: c_p0, _T_AMB: float(temperature_k), _T_INIT: float(temperature_k)}
-            sol, sol_w, soc_start, charge0 = None, None, soc, 0.0
-        series = self.params.series
+        base, sol, sol_w, soc_start, charge0 = self._start(start, temperature_k)
         r_factor = float(series_resistance_factor(self.params, temperature_k))
         thermal = model_options(self.params).get("thermal", "isothermal") == "lumped"
         times, volts, amps, ends = [], [], [], []
@@ -286,19 +278,10 @@ class PackRunner:
                         break
                     raise SimulationError(f"pack model failed: {str(exc).splitlines()[0]}") from None
                 if weak_sim is None:
-                    v_pack = series * v_cell
+                    v_pack = self.params.series * v_cell
                 else:  # extension cell_imbalance: the group that reached its cut-off first ends the segment
-                    if t_w[-1] < t_seg[-1]:
-                        v_cell = np.interp(t_w, t_seg, v_cell)
-                        if t_cell is not None:
-                            t_cell = np.interp(t_w, t_seg, t_cell)
-                        t_seg = t_w
-                        new = self._truncated(self._sim, sol, new, float(t_w[-1]), inputs)
-                    else:
-                        v_w = np.interp(t_seg, t_w, v_w)
-                        if t_seg[-1] < t_w[-1]:
-                            new_w = self._truncated(weak_sim, sol_w, new_w, float(t_seg[-1]), inputs)
-                    v_pack = (series - 1) * v_cell + v_w
+                    t_seg, v_pack, t_cell, new, new_w = self._with_weak_group(
+                        (t_seg, v_cell, t_cell, sol, new), (t_w, v_w, sol_w, new_w), inputs)
                 times.append(t0 + t_seg)
                 # a lumped thermal cell: the series resistance's Arrhenius factor at the cell temperature
                 factor = r_factor if t_cell is None else series_resistance_factor(self.params, t_cell)
@@ -322,8 +305,57 @@ class PackRunner:
                           pack_current_a=np.concatenate(amps), segment_end_index=ends, reached_cutoff=cutoff,
                           end_time_s=t0, final_state=final)
 
+    def _start(self, start: float | RunState, temperature_k: float
+               ) -> tuple[dict[str, float], pybamm.Solution | None, pybamm.Solution | None, float, float]:
+        """What a run starts from: (the ``[input]`` values, the normal and the weak group's solution to continue
+        (None from an SOC), the SOC the state started from, the charge drawn since then in Ah)."""
+        if isinstance(start, RunState):
+            sol, sol_w = start.solution, start.weak_solution
+            if self._weak_sim is not None and sol is not None and sol_w is None:
+                raise SimulationError("the state to continue from has no weak-group solution "
+                                      "(made by a runner without cell_imbalance?)")
+            base = dict(start.base_inputs)
+            base[_T_AMB] = float(temperature_k)
+            return base, sol, sol_w, start.soc_start, start.charge_ah
+        soc = float(start)
+        lo, hi = self.soc_bounds
+        if not np.isfinite(soc) or not (lo - 1e-9 <= soc <= hi + 1e-9):
+            raise SimulationError(f"SOC must be within {lo:.3f}..{hi:.3f} for this model, got {soc}")
+        c_n0, c_p0 = self.concentrations(soc)
+        base = {_C_N0: c_n0, _C_P0: c_p0, _T_AMB: float(temperature_k), _T_INIT: float(temperature_k)}
+        return base, None, None, soc, 0.0
+
+    def _with_weak_group(self, normal: tuple[np.ndarray, np.ndarray, np.ndarray | None, pybamm.Solution | None,
+                                             pybamm.Solution],
+                         weak: tuple[np.ndarray, np.ndarray, pybamm.Solution | None, pybamm.Solution],
+                         inputs: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, pybamm.Solution,
+                                                pybamm.Solution]:
+        """One segment of the pack with a weak group (extension ``cell_imbalance``).
+
+        ``normal`` is a normal cell's (times s, voltage V, temperature K or None, solution before, solution
+        after) and ``weak`` the weak group's (times, voltage, solution before, after). The group that reached
+        its cut-off first ends the segment: the other is interpolated onto its times and re-stepped to its
+        end. Returns (times s, pack voltage V without the series resistance, cell temperature K or None,
+        normal solution, weak solution).
+        """
+        t_seg, v_cell, t_cell, sol, new = normal
+        t_w, v_w, sol_w, new_w = weak
+        assert self._weak_sim is not None  # called only with a weak group
+        if t_w[-1] < t_seg[-1]:
+            v_cell = np.interp(t_w, t_seg, v_cell)
+            if t_cell is not None:
+                t_cell = np.interp(t_w, t_seg, t_cell)
+            t_seg = t_w
+            new = self._truncated(self._sim, sol, new, float(t_w[-1]), inputs)
+        else:
+            v_w = np.interp(t_seg, t_w, v_w)
+            if t_seg[-1] < t_w[-1]:
+                new_w = self._truncated(self._weak_sim, sol_w, new_w, float(t_seg[-1]), inputs)
+        return t_seg, (self.params.series - 1) * v_cell + v_w, t_cell, new, new_w
+
     @staticmethod
-    def _truncated(sim, start_solution, longer_solution, duration_s: float, inputs: dict):
+    def _truncated(sim: pybamm.Simulation, start_solution: pybamm.Solution | None, longer_solution: pybamm.Solution,
+                   duration_s: float, inputs: dict) -> pybamm.Solution:
         """``sim``'s state ``duration_s`` after ``start_solution`` (the other group's cut-off time).
 
         Re-steps the group that ran past the other's cut-off, so that both solutions of the

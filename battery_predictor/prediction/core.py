@@ -12,17 +12,18 @@ from __future__ import annotations
 import math
 import threading
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.params import PackParams, load_params
 from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, history_segments
-from battery_predictor.prediction.cell_runner import PackRunner
 from battery_predictor.prediction.load_estimate import LoadEstimator, LoadKind
-from battery_predictor.prediction.pack_model import pack_model
+from battery_predictor.prediction.pack_model import PackModel, pack_model
 from battery_predictor.prediction.route import RouteDecision, rejected
 from battery_predictor.prediction.runtime import RuntimePrediction, predict_remaining_runtime
 from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v, unexplained_jump_v
@@ -35,6 +36,9 @@ from battery_predictor.prediction.uncertainty import (
     runtime_spread,
     uncertainty_model,
 )
+
+if TYPE_CHECKING:
+    from battery_predictor.profiles.ranger import RouteSection
 
 # Status codes, identical to battery_predictor_msgs/RemainingRuntime constants.
 STATUS_OK = 0
@@ -215,7 +219,7 @@ class PredictorCore:
         self.events: deque[tuple[float, str]] = deque(maxlen=100)
         self.model_error = ""
         self.params: PackParams | None = None
-        self.runner: PackRunner | None = None
+        self.runner: PackModel | None = None
         #: Which pack model answers, and why (engine or PyBaMM stepping).
         self.model_backend = ""
         try:
@@ -252,7 +256,7 @@ class PredictorCore:
         key = round(temperature_k)
         if key not in self._resistance_cache:
             try:
-                self._resistance_cache[key] = pulse_resistance_ohm(self.runner, float(key))
+                self._resistance_cache[key] = pulse_resistance_ohm(self._runner(), float(key))
             except BatteryPredictorError:
                 self._resistance_cache[key] = math.nan
         return self._resistance_cache[key]
@@ -301,7 +305,13 @@ class PredictorCore:
         with self._lock:
             return self._state
 
-    def _usable_state(self, now_s: float) -> tuple[int, str, tuple | None]:
+    def _runner(self) -> PackModel:
+        """The pack model (raises when no params file could be loaded; answers check ``_usable_state`` first)."""
+        if self.runner is None:
+            raise BatteryPredictorError(f"no usable pack model: {self.model_error}")
+        return self.runner
+
+    def _usable_state(self, now_s: float) -> tuple[int, str, tuple[float, float, float, float] | None]:
         if self.runner is None:
             return STATUS_MODEL_NOT_FITTED, f"no usable pack model: {self.model_error}", None
         state = self.latest_state()
@@ -357,7 +367,8 @@ class PredictorCore:
         except BatteryPredictorError:
             pass
 
-    def _propagate(self, cached: tuple[float, float, Calibration], hist: list, temperature_k: float):
+    def _propagate(self, cached: tuple[float, float, Calibration], hist: list[tuple[float, float, float, float]],
+                   temperature_k: float) -> Calibration | None:
         """The cached state carried to now by the measured current, or None when it left the measurement."""
         newer = [h for h in hist if h[0] >= cached[0]]
         if len(newer) < 2:
@@ -365,7 +376,10 @@ class PredictorCore:
         t = np.array([h[0] for h in newer])
         i = np.array([h[2] for h in newer])
         segs = history_segments(t, i, max_segments=min(120, len(newer) - 1))
-        run = self.runner.run(cached[2].state, segs, temperature_k)
+        start = cached[2].state
+        if start is None:
+            return None
+        run = self._runner().run(start, segs, temperature_k)
         if run.final_state is None or run.reached_cutoff:
             return None
         residual = float(run.pack_voltage_v[-1]) - hist[-1][1]
@@ -374,17 +388,18 @@ class PredictorCore:
                 self.events.append((hist[-1][0], f"propagated state {residual:+.2f} V off the measurement: "
                                                   "recalibrated"))
             return None
-        cal = Calibration(self.runner.soc_of(run.final_state), residual, "", run.final_state, residual)
+        cal = Calibration(self._runner().soc_of(run.final_state), residual, "", run.final_state, residual)
         self._cal = (hist[-1][0], cached[1], cal)
         return cal
 
-    def _calibrate_fresh(self, hist: list, temperature_k: float) -> Calibration:
+    def _calibrate_fresh(self, hist: list[tuple[float, float, float, float]], temperature_k: float) -> Calibration:
         t = np.array([h[0] for h in hist])
         v = np.array([h[1] for h in hist])
         i = np.array([h[2] for h in hist])
         window = self.config.calibration_window_s
-        cal = calibrate_on_history(self.runner, t, v, i, temperature_k, window_s=max(window, 1.0)) if window > 0 \
-            else calibrate_on_history(self.runner, t[-1:], v[-1:], i[-1:], temperature_k)
+        runner = self._runner()
+        cal = calibrate_on_history(runner, t, v, i, temperature_k, window_s=max(window, 1.0)) if window > 0 \
+            else calibrate_on_history(runner, t[-1:], v[-1:], i[-1:], temperature_k)
         self._cal = (t[-1], t[-1], cal)
         return cal
 
@@ -400,7 +415,7 @@ class PredictorCore:
         """Remaining runtime until the cut-off under the present cycle's load (never raises for bad input)."""
         status, reason, state = self._usable_state(now_s)
         cutoff = self.cutoff_voltage_v
-        if status != STATUS_OK:
+        if status != STATUS_OK or state is None:
             return _invalid_runtime(now_s, cutoff, status, reason)
         stamp, v, i, t_k = state
         temp = self._temperature(t_k)
@@ -423,10 +438,10 @@ class PredictorCore:
             return _invalid_runtime(stamp, cutoff, STATUS_NO_LOAD,
                                     f"no discharge load in the present cycle to predict from ({what})",
                                     temperature_k=temp)
-        power = load.mean_power_w if kind.exponent > 0 else math.nan
-        power = power if math.isfinite(power) and power > 0 else None
+        mean_power_w = load.mean_power_w if kind.exponent > 0 else math.nan
+        power = mean_power_w if math.isfinite(mean_power_w) and mean_power_w > 0 else None
         try:
-            pred = predict_remaining_runtime(self.runner, v, i, temp, avg, cutoff,
+            pred = predict_remaining_runtime(self._runner(), v, i, temp, avg, cutoff,
                                              calibration=self.calibration(temp),
                                              peak_current_a=peak if math.isfinite(peak) else None,
                                              peak_duration_s=self._peak_duration_s(), average_power_w=power,
@@ -480,7 +495,7 @@ class PredictorCore:
         sigma = future_load_sigma(stamps, demand, pred.average_end_s)
         load = replace(load, sigma=sigma if math.isfinite(sigma) else 0.0)
         try:
-            return runtime_spread(self.runner, pred.calibration.start, pred.calibration.soc, pred, load,
+            return runtime_spread(self._runner(), pred.calibration.start, pred.calibration.soc, pred, load,
                                   self.uncertainty, self.state_voltage_sigma_v(pred.calibration), voltage_v)
         except BatteryPredictorError:
             return None
@@ -493,7 +508,7 @@ class PredictorCore:
             return LoadKind(0.0, math.nan, math.nan, 0, False)
         return self._load.kind(resistance_ohm, AUTO_LOAD_PRIOR)
 
-    def can_accept_route(self, sections, now_s: float, *, starts_away_from_charger: bool = False,
+    def can_accept_route(self, sections: Sequence[RouteSection], now_s: float, *, starts_away_from_charger: bool = False,
                          ends_away_from_charger: bool = False) -> RouteDecision:
         """Decide a route (sections: :class:`~battery_predictor.profiles.ranger.RouteSection`).
 
@@ -505,7 +520,7 @@ class PredictorCore:
         if not math.isfinite(threshold):
             return rejected("params define no route threshold (thresholds.route_min_voltage_v)", threshold)
         status, reason, state = self._usable_state(now_s)
-        if status != STATUS_OK:
+        if status != STATUS_OK or state is None:
             return rejected(f"state unknown: {reason}", threshold)
         _, v, i, t_k = state
         temp = self._temperature(t_k)
@@ -529,7 +544,7 @@ class PredictorCore:
             return rejected(f"the model cannot reproduce the measured {v:.2f} V (off by {cal.latest_residual_v:+.2f} V "
                             f"after calibration, tolerance {self.state_tolerance_v:.2f} V): state uncertain",
                             threshold, soc=soc)
-        decision = evaluate_route_at_risk(self.runner, cal.start, sections, temp, threshold_v=threshold,
+        decision = evaluate_route_at_risk(self._runner(), cal.start, sections, temp, threshold_v=threshold,
                                           standstill_current_a=self.standstill_current_a, currents=self._currents,
                                           risk=self.config.decision_risk, model=self.uncertainty,
                                           state_voltage_sigma_v=self.state_voltage_sigma_v(cal))
@@ -566,7 +581,7 @@ def _invalid_runtime(stamp_s: float, cutoff_v: float, status: int, reason: str, 
     return RuntimeStatus(stamp_s, remaining_s, math.nan, temperature_k, math.nan, cutoff_v, False, status, reason)
 
 
-def _pick(*values) -> float:
+def _pick(*values: object) -> float:
     for v in values:
         if v is not None and isinstance(v, (int, float)) and math.isfinite(v):
             return float(v)

@@ -27,9 +27,12 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 #: A gap between two samples counts at most this long in the averages, s.
 MAX_GAP_S = 300.0
@@ -265,14 +268,15 @@ def _steady_kind(t: np.ndarray, i: np.ndarray, power: np.ndarray) -> LoadKind | 
     return None
 
 
-def _trend(t: np.ndarray, values: np.ndarray, spearmanr) -> float:
+def _trend(t: np.ndarray, values: np.ndarray, spearmanr: Callable[[np.ndarray, np.ndarray], Any]) -> float:
     """Spearman's rank correlation of ``values`` with ``t``; 0 (no trend) for a constant series."""
     if np.ptp(values) <= 1e-9 * max(float(np.max(np.abs(values))), 1e-12):
         return 0.0  # a constant current (a CC discharge) has no trend, and rank statistics are undefined
     return float(spearmanr(t, values).statistic)
 
 
-def load_kind(stamps_s, currents_a, voltages_v, resistance_ohm: float, prior: float) -> LoadKind:
+def load_kind(stamps_s: npt.ArrayLike, currents_a: npt.ArrayLike, voltages_v: npt.ArrayLike, resistance_ohm: float,
+              prior: float) -> LoadKind:
     """The exponent of the load's constant demand ``I V^k`` from the windows of a discharge cycle.
 
     Under a constant current the currents show no trend over the cycle while the powers fall

@@ -11,10 +11,15 @@ cover run on :class:`~.cell_runner.PackRunner` (PyBaMM's solver), and the predic
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any, Protocol
+
+import numpy as np
+
 from battery_predictor.errors import SimulationError
 from battery_predictor.params import PackParams
-from battery_predictor.prediction.cell_runner import PackRunner
-from battery_predictor.simulation.engine.segments import EnginePack
+from battery_predictor.prediction.cell_runner import PackRunner, RunState
+from battery_predictor.simulation.engine.segments import EnginePack, EngineState
 from battery_predictor.simulation.extensions import (
     EA_SERIES,
     current_offset_a,
@@ -27,7 +32,72 @@ from battery_predictor.simulation.extensions import (
 BACKENDS = ("auto", "engine", "pybamm")
 
 
-def pack_model(params: PackParams, backend: str = "auto"):
+#: Where a run starts: an SOC, or the state a run of the same model returned.
+RunStart = float | RunState | EngineState
+
+
+class PackRun(Protocol):
+    """A run of a :class:`PackModel` (``SegmentRun`` of PyBaMM stepping, ``EngineSegmentRun`` of the engine)."""
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """Sample times in s from the start."""
+
+    @property
+    def pack_voltage_v(self) -> np.ndarray:
+        """Pack voltage in V at those times."""
+
+    @property
+    def pack_current_a(self) -> np.ndarray:
+        """Pack current in A (positive = discharge)."""
+
+    @property
+    def segment_end_index(self) -> list[int]:
+        """Index into ``time_s`` of the last sample of each completed segment."""
+
+    @property
+    def reached_cutoff(self) -> bool:
+        """True when a cell reached its lower cut-off before the end."""
+
+    @property
+    def end_time_s(self) -> float:
+        """Time in s at which the run ended."""
+
+    @property
+    def final_state(self) -> Any:
+        """The state at the end to continue from: the model's own type (``RunState``, ``EngineState``), or None."""
+
+
+class PackModel(Protocol):
+    """The pack model the predictor runs: :class:`~.cell_runner.PackRunner` (PyBaMM stepping) or
+    :class:`~battery_predictor.simulation.engine.segments.EnginePack` (the engine).
+
+    A run starts from an SOC or from a state a run of the same model returned; each model has its own
+    state type, so the state is ``Any`` here.
+    """
+
+    @property
+    def soc_bounds(self) -> tuple[float, float]:
+        """Widest SOC range (low, high) a run may start from (the scale may extend beyond 0..1)."""
+
+    @property
+    def capacity_ah(self) -> float:
+        """Usable pack capacity between 0 % and 100 % SOC, Ah."""
+
+    def concentrations(self, soc: float) -> tuple[float, float]:
+        """Initial (c_n, c_p) in mol/m3 at ``soc``."""
+
+    def soc_of(self, state: Any) -> float:
+        """The SOC of a state a run returned."""
+
+    def run(self, start: Any, segments: Sequence[tuple[float, float]], temperature_k: float) -> PackRun:
+        """Run ``segments`` ((duration s, pack current A) pairs) from an SOC or a state at ``temperature_k`` (K)."""
+
+    def __hash__(self) -> int:
+        """Models are hashable: caches of the OCV slope are keyed on the model."""
+
+
+def pack_model(params: PackParams, backend: str = "auto") -> tuple[PackModel, str]:
     """The pack model for ``params`` and a line saying which one it is and why.
 
     Parameters
@@ -61,7 +131,7 @@ def pack_model(params: PackParams, backend: str = "auto"):
 FALLBACK_PREFIX = "pybamm (the engine cannot run these params: "
 
 
-def engine_pack(params: PackParams):
+def engine_pack(params: PackParams) -> EnginePack:
     """The engine's pack for ``params``, with the values its extensions need.
 
     ``current_offset`` (the cells carry reading - offset), ``cell_imbalance`` (the weak group),

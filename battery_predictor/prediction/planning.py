@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from battery_predictor.errors import BatteryPredictorError, RequestError
 from battery_predictor.prediction.route import RouteDecision
@@ -45,6 +46,9 @@ from battery_predictor.profiles.ranger import (
     mean_current_a,
 )
 from battery_predictor.profiles.station import FLAT, UPHILL, Segment, Station, StationPath
+
+if TYPE_CHECKING:
+    from battery_predictor.prediction.core import PredictorCore
 
 #: Kinds of planned routes.
 SHORTEST = "shortest"
@@ -389,7 +393,7 @@ def leg_sections(route: StationPath, origin: str, goal: str, payload_kg: float, 
     return out
 
 
-def plan_from_core(core, planner: RoutePlanner, request: PlanRequest, now_s: float) -> RoutePlan:
+def plan_from_core(core: PredictorCore, planner: RoutePlanner, request: PlanRequest, now_s: float) -> RoutePlan:
     """Plan a job from a :class:`~battery_predictor.prediction.core.PredictorCore`'s present state (never raises).
 
     The shortest route and the least-charge path are decided by ``core.can_accept_route``; the
@@ -398,7 +402,7 @@ def plan_from_core(core, planner: RoutePlanner, request: PlanRequest, now_s: flo
     """
     threshold = core.route_min_voltage_v
 
-    def decide(sections, starts_away, ends_away):
+    def decide(sections: Sequence[RouteSection], starts_away: bool, ends_away: bool) -> RouteDecision:
         return core.can_accept_route(sections, now_s, starts_away_from_charger=starts_away,
                                      ends_away_from_charger=ends_away)
 
@@ -411,8 +415,10 @@ def plan_from_core(core, planner: RoutePlanner, request: PlanRequest, now_s: flo
         soc_range = (max(lo, 0.0), min(hi, 1.0))
         capacity = core.runner.capacity_ah
 
-        def from_soc(sections, soc):
-            return evaluate_route_at_risk(core.runner, soc, sections, temp, threshold_v=threshold,
+        runner = core.runner
+
+        def from_soc(sections: Sequence[RouteSection], soc: float) -> RouteDecision:
+            return evaluate_route_at_risk(runner, soc, sections, temp, threshold_v=threshold,
                                           standstill_current_a=core.standstill_current_a, currents=planner.currents,
                                           risk=core.config.decision_risk, model=core.uncertainty,
                                           state_voltage_sigma_v=core.state_voltage_sigma_v())

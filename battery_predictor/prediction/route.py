@@ -11,10 +11,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from battery_predictor.errors import BatteryPredictorError, RequestError
-from battery_predictor.prediction.cell_runner import PackRunner, RunState
 from battery_predictor.profiles.ranger import RangerCurrents, RouteSection, mean_current_a
+
+if TYPE_CHECKING:
+    from battery_predictor.prediction.pack_model import PackModel, RunStart
 
 #: Standstill after the route at which the voltage is read, s (the paper's final curve point).
 SETTLE_S = 60.0
@@ -94,14 +97,14 @@ def rejected(reason: str, threshold_v: float, *, duration_s: float = math.nan, c
     return RouteDecision(False, math.nan, threshold_v, math.nan, duration_s, charge_ah, soc, reason)
 
 
-def evaluate_route(runner: PackRunner, start: float | RunState, sections: Sequence[RouteSection],
+def evaluate_route(runner: PackModel, start: RunStart, sections: Sequence[RouteSection],
                    temperature_k: float, *, threshold_v: float, standstill_current_a: float,
                    currents: RangerCurrents | None = None, settle_s: float = SETTLE_S) -> RouteDecision:
     """Simulate a route from ``start`` and decide (never raises for a bad route: rejects with a reason).
 
     Parameters
     ----------
-    runner : PackRunner
+    runner : PackModel
         The fitted pack model.
     start : float or RunState
         Calibrated SOC, or the calibrated model state (see ``Calibration.start``).
@@ -143,7 +146,8 @@ def evaluate_route(runner: PackRunner, start: float | RunState, sections: Sequen
     return RouteDecision(accepted, v_end, threshold_v, margin, duration_s, charge_ah, soc, reason)
 
 
-def _run_end(runner, start, segments, temperature_k: float) -> tuple[bool, float, float]:
+def _run_end(runner: PackModel, start: RunStart, segments: list[tuple[float, float]],
+             temperature_k: float) -> tuple[bool, float, float]:
     """(reached_cutoff, end_time_s, last pack voltage V) of ``runner.run(start, segments, temperature_k)``.
 
     The engine answers this without the samples inside the segments (``EnginePack.run_end``, the

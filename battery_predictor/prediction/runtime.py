@@ -12,13 +12,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import brentq
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.prediction.calibration import Calibration, calibrate_soc
-from battery_predictor.prediction.cell_runner import PackRunner
+
+if TYPE_CHECKING:
+    from battery_predictor.prediction.pack_model import PackModel, PackRun, RunStart
 
 #: Longest horizon simulated, s (beyond it the runtime is reported as at least this).
 MAX_HORIZON_S = 72 * 3600.0
@@ -68,7 +71,7 @@ def time_to_voltage_s(time_s: np.ndarray, voltage_v: np.ndarray, threshold_v: fl
     return float(t0 + (v0 - threshold_v) / (v0 - v1) * (t1 - t0)) if v0 != v1 else float(t1)
 
 
-def peak_voltage_drop_v(runner: PackRunner, start, average_current_a: float, peak_current_a: float,
+def peak_voltage_drop_v(runner: PackModel, start: RunStart, average_current_a: float, peak_current_a: float,
                         temperature_k: float, settle_s: float = 5.0) -> float:
     """Extra pack voltage drop (V) under ``peak_current_a`` compared to ``average_current_a``.
 
@@ -132,8 +135,9 @@ class LoadPath:
         return float(self.current_a[max(k, 0)])
 
 
-def demand_run(runner: PackRunner, start, current_a: float, power_w: float, exponent: float, horizon_s: float,
-               temperature_k: float, first_voltage_v: float, cutoff_voltage_v: float):
+def demand_run(runner: PackModel, start: RunStart, current_a: float, power_w: float, exponent: float,
+               horizon_s: float, temperature_k: float, first_voltage_v: float,
+               cutoff_voltage_v: float) -> tuple[PackRun, LoadPath]:
     """The pack under a constant demand ``I V^k``: ``(run, LoadPath)``.
 
     The current of each step (:data:`POWER_STEP_S`, longer when the horizon needs more than
@@ -177,7 +181,7 @@ def demand_run(runner: PackRunner, start, current_a: float, power_w: float, expo
                           f"in {POWER_PASSES} passes")
 
 
-def run_end_s(run, cutoff_voltage_v: float) -> float | None:
+def run_end_s(run: PackRun, cutoff_voltage_v: float) -> float | None:
     """Time (s) at which an average-load run reaches the pack cut-off or a cell's, or None within its horizon."""
     t_end = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
     if t_end is None and run.reached_cutoff:
@@ -190,14 +194,14 @@ def path_charge_ah(path: LoadPath, until_s: float) -> float:
     return sum(d * i for d, i in path.segments(until_s)) / 3600.0 if until_s > 0 else 0.0
 
 
-def load_horizon_s(runner: PackRunner, soc: float, average_current_a: float) -> float:
+def load_horizon_s(runner: PackModel, soc: float, average_current_a: float) -> float:
     """Horizon (s) simulated for a load: 1.5 times the charge left at the average current, plus an hour."""
     charge_left_ah = max(soc - runner.soc_bounds[0], 0.02) * runner.capacity_ah
     return min(MAX_HORIZON_S, 1.5 * charge_left_ah * 3600.0 / average_current_a + 3600.0)
 
 
-def peak_crossing_s(runner: PackRunner, start, average: LoadPath, peak_factor: float,
-                    temperature_k: float, cutoff_voltage_v: float, average_run, *, settle_s: float = 5.0,
+def peak_crossing_s(runner: PackModel, start: RunStart, average: LoadPath, peak_factor: float,
+                    temperature_k: float, cutoff_voltage_v: float, average_run: PackRun, *, settle_s: float = 5.0,
                     tolerance_s: float = 30.0, max_runs: int = 16) -> float | None:
     """First time (s) at which a load peak, drawn from the average-load trajectory, pulls the pack to the cut-off.
 
@@ -252,7 +256,7 @@ def peak_crossing_s(runner: PackRunner, start, average: LoadPath, peak_factor: f
     return float(root)
 
 
-def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: float, temperature_k: float,
+def predict_remaining_runtime(runner: PackModel, voltage_v: float, current_a: float, temperature_k: float,
                               average_current_a: float, cutoff_voltage_v: float,
                               calibration: Calibration | None = None,
                               peak_current_a: float | None = None, peak_duration_s: float = 5.0,
@@ -261,7 +265,7 @@ def predict_remaining_runtime(runner: PackRunner, voltage_v: float, current_a: f
 
     Parameters
     ----------
-    runner : PackRunner
+    runner : PackModel
         The fitted pack model.
     voltage_v, current_a, temperature_k : float
         Latest measured pack voltage (V), current (A, positive = discharge) and temperature (K).

@@ -21,18 +21,21 @@ discharging pack is on the low side and the measured check stays conservative.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from battery_predictor.errors import SimulationError
-from battery_predictor.prediction.cell_runner import PackRunner
+
+if TYPE_CHECKING:
+    from battery_predictor.prediction.pack_model import PackModel
 
 
-def pulse_resistance_ohm(runner: PackRunner, temperature_k: float, *, soc: float = 0.5, current_a: float | None = None,
+def pulse_resistance_ohm(runner: PackModel, temperature_k: float, *, soc: float = 0.5, current_a: float | None = None,
                          pulse_s: float = 5.0) -> float:
     """Pack resistance (Ohm) to a ``pulse_s`` current step from rest at ``soc``.
 
     Parameters
     ----------
-    runner : PackRunner
+    runner : PackModel
         The pack model.
     temperature_k : float
         Temperature, K.

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from battery_predictor.config import default_params_file, read_yaml_mapping
 from battery_predictor.errors import BatteryPredictorError, ParamsError
@@ -21,6 +22,9 @@ from battery_predictor.prediction.planning import PlanRequest, RoutePlan, RouteP
 from battery_predictor.prediction.tasks import Task, TaskLoads, TaskPlan, feasible_tasks, invalid_plan
 from battery_predictor.profiles.station import load_station
 from battery_predictor.profiles.temi import default_config_path, load_usage_config
+
+if TYPE_CHECKING:
+    from battery_predictor.prediction.core import PredictorCore
 
 #: Shipped information-robot map.
 DEFAULT_TASK_MAP_FILE = "minden_information_map.yaml"
@@ -82,7 +86,7 @@ class StationServices:
         #: Average load assumed for the remaining time when the present cycle has none yet, A.
         self.fallback_current_a = usage.expected_mean_current_a()
 
-    def feasible_tasks(self, core, tasks: Sequence[Task], location: str, policy: str, now_s: float) -> TaskPlan:
+    def feasible_tasks(self, core: PredictorCore, tasks: Sequence[Task], location: str, policy: str, now_s: float) -> TaskPlan:
         """Answer ``/feasible_tasks`` from ``core``'s present state (never raises)."""
         try:
             return feasible_tasks(core, tasks, location, policy, now_s, self.task_map, self.config.charger_node,
@@ -91,7 +95,7 @@ class StationServices:
             return invalid_plan(tasks, policy, f"model failed: internal error: {type(exc).__name__}: {exc}",
                                 getattr(core, "cutoff_voltage_v", math.nan))
 
-    def plan_route(self, core, request: PlanRequest, now_s: float) -> RoutePlan:
+    def plan_route(self, core: PredictorCore, request: PlanRequest, now_s: float) -> RoutePlan:
         """Answer ``/plan_route`` from ``core``'s present state (never raises)."""
         try:
             return plan_from_core(core, self.planner, request, now_s)

@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -48,6 +48,10 @@ from battery_predictor.prediction.runtime import MAX_HORIZON_S, time_to_voltage_
 from battery_predictor.prediction.uncertainty import UncertaintyModel, route_spread
 from battery_predictor.profiles.station import Station
 from battery_predictor.profiles.temi import INFORMATION, NAVIGATION, TemiUsageConfig
+
+if TYPE_CHECKING:
+    from battery_predictor.prediction.core import PredictorCore
+    from battery_predictor.prediction.pack_model import PackModel, PackRun, RunStart
 
 #: Task kinds.
 KINDS = (INFORMATION, NAVIGATION)
@@ -301,7 +305,7 @@ class TaskPlanner:
 
     Parameters
     ----------
-    runner : PackRunner or EnginePack
+    runner : PackModel
         The pack model (``run``, ``soc_of``, ``soc_bounds``, ``capacity_ah``).
     station : Station
         The robot's map (``minden_information_map.yaml``).
@@ -319,7 +323,7 @@ class TaskPlanner:
         Decide at this risk (default: on the median voltages).
     """
 
-    def __init__(self, runner, station: Station, charger: str, loads: TaskLoads, cutoff_voltage_v: float,
+    def __init__(self, runner: PackModel, station: Station, charger: str, loads: TaskLoads, cutoff_voltage_v: float,
                  temperature_k: float, average_current_a: float, risk: TaskRisk | None = None) -> None:
         self.runner = runner
         self.risk = risk
@@ -368,14 +372,14 @@ class TaskPlanner:
             duration = max(d / self.loads.speed_m_s, 1.0)
         return [(duration, current)], end
 
-    def _ok(self, run) -> tuple[bool, float]:
+    def _ok(self, run: PackRun) -> tuple[bool, float]:
         """(no cut-off reached and every voltage >= cut-off, lowest voltage)."""
         if run.reached_cutoff:
             return False, math.nan
         low = float(np.min(run.pack_voltage_v))
         return low >= self.cutoff_voltage_v, low
 
-    def _remaining_s(self, state) -> float:
+    def _remaining_s(self, state: RunStart) -> float:
         avg = self.average_current_a
         if not (math.isfinite(avg) and avg > 0):
             return math.nan
@@ -388,7 +392,7 @@ class TaskPlanner:
             return t
         return float(run.end_time_s) if run.reached_cutoff else horizon_s
 
-    def try_task(self, start, location: str, task: Task) -> tuple[TaskOutcome, object | None, str]:
+    def try_task(self, start: RunStart, location: str, task: Task) -> tuple[TaskOutcome, RunStart | None, str]:
         """Simulate ``task`` from ``start`` at ``location``: (outcome, state after the task or None, end location)."""
         try:
             segments, end = self.task_segments(task, location)
@@ -437,7 +441,8 @@ class TaskPlanner:
         return (TaskOutcome(**base, feasible=feasible, end_voltage_v=v_end, return_voltage_v=v_back, margin_v=margin,
                             remaining_after_s=remaining, reason=reason, probability_feasible=probability), state, end)
 
-    def _at_risk(self, start, after, task: Task, task_s: float, segments, low_v: float) -> tuple[float, float]:
+    def _at_risk(self, start: RunStart, after: RunStart, task: Task, task_s: float,
+                 segments: list[tuple[float, float]], low_v: float) -> tuple[float, float]:
         """(probability that the lowest voltage stays above the cut-off, the lowest voltage at the risk), V."""
         risk = self.risk
         assert risk is not None  # asked only with a risk
@@ -456,7 +461,7 @@ class TaskPlanner:
                               self.temperature_k, risk.model, risk.state_voltage_sigma_v, lowest_at)
         return spread.probability_above(low_v - self.cutoff_voltage_v), spread.voltage_at_risk_v(low_v, risk.risk)
 
-    def max_time_s(self, start, location: str, current_a: float) -> float:
+    def max_time_s(self, start: RunStart, location: str, current_a: float) -> float:
         """Longest time (s) at ``current_a`` from ``start`` that still leaves the walk back (to
         :data:`SEARCH_TOLERANCE_S`, rounded down; the model's horizon when beyond it)."""
         ret = self._return_segments(location)
@@ -478,7 +483,7 @@ class TaskPlanner:
         return lo
 
     # ------------------------------------------------------------- answers
-    def evaluate(self, start, location: str, tasks: Sequence[Task], policy: str) -> TaskPlan:
+    def evaluate(self, start: RunStart, location: str, tasks: Sequence[Task], policy: str) -> TaskPlan:
         """Answer a request from the calibrated ``start`` (SOC or model state) at ``location``.
 
         Raises
@@ -508,6 +513,7 @@ class TaskPlanner:
                 continue
             outcome, after, end = self.try_task(state, here, task)
             if outcome.feasible:
+                assert after is not None  # a feasible task ends in a state
                 state, here = after, end
             elif policy == POLICY_ORDERED:
                 blocked = task.name
@@ -522,7 +528,7 @@ class TaskPlanner:
         return TaskPlan(True, policy, tuple(outcomes), walks, walk_m, info_s, summary, soc, self.cutoff_voltage_v,
                         reason)
 
-    def summary(self, start, location: str) -> tuple[int, float, float, str]:
+    def summary(self, start: RunStart, location: str) -> tuple[int, float, float, str]:
         """(guided walks, one-way walk length in m, information time in s, sentence) from ``start``."""
         if location:
             others = [(self.station.distance_m(location, n), n) for n in self.station.nodes if n != location]
@@ -541,7 +547,7 @@ class TaskPlanner:
         return walks, walk_m, info_s, sentence
 
 
-def feasible_tasks(core, tasks: Sequence[Task], location: str, policy: str, now_s: float, station: Station,
+def feasible_tasks(core: PredictorCore, tasks: Sequence[Task], location: str, policy: str, now_s: float, station: Station,
                    charger: str, loads: TaskLoads, fallback_current_a: float) -> TaskPlan:
     """Answer a request from a :class:`~battery_predictor.prediction.core.PredictorCore`'s present state.
 

@@ -29,10 +29,10 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from statistics import NormalDist
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,6 +40,11 @@ from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.prediction.route import RouteDecision, evaluate_route
 from battery_predictor.prediction.runtime import demand_run, load_horizon_s, run_end_s
 from battery_predictor.profiles.ranger import DEFAULT_POINT_DURATION_S, std_current_a
+
+if TYPE_CHECKING:
+    from battery_predictor.prediction.pack_model import PackModel, RunStart
+    from battery_predictor.prediction.runtime import RuntimePrediction
+    from battery_predictor.profiles.ranger import RangerCurrents, RouteSection
 
 #: Standard normal quantile of 0.9: P10 and P90 lie this many sigmas from P50.
 Z_P90 = NormalDist().inv_cdf(0.9)
@@ -299,7 +304,7 @@ OCV_HALF_STEP = 0.02
 
 
 @functools.lru_cache(maxsize=512)
-def _relaxed_pack_voltage_v(runner, soc: float, temperature_k: float) -> float:
+def _relaxed_pack_voltage_v(runner: PackModel, soc: float, temperature_k: float) -> float:
     """Pack voltage (V) of a relaxed state at ``soc`` after 1 s at no current (its OCV); NaN when the model fails."""
     try:
         return float(runner.run(soc, [(1.0, 0.0)], temperature_k).pack_voltage_v[-1])
@@ -307,7 +312,7 @@ def _relaxed_pack_voltage_v(runner, soc: float, temperature_k: float) -> float:
         return math.nan
 
 
-def pack_ocv_slope_v(runner, soc: float, temperature_k: float) -> float:
+def pack_ocv_slope_v(runner: PackModel, soc: float, temperature_k: float) -> float:
     """Pack open-circuit voltage per unit SOC at ``soc`` (V), from relaxed model states (NaN when unknown).
 
     A central difference over :data:`OCV_HALF_STEP` around the nearest :data:`OCV_GRID` point
@@ -348,7 +353,7 @@ class LoadAhead:
     undecided_exponent: float | None = None
 
 
-def _end_s(runner, start, load: LoadAhead, factor: float, temperature_k: float, first_voltage_v: float,
+def _end_s(runner: PackModel, start: RunStart, load: LoadAhead, factor: float, temperature_k: float, first_voltage_v: float,
            cutoff_v: float, soc: float, exponent: float | None = None) -> float | None:
     """Average-load end time (s) with the demand scaled by ``factor`` (None when it fails or is beyond reach)."""
     current = load.current_a * factor
@@ -369,13 +374,13 @@ def _log_ratios(base_s: float, shorter_s: float | None, longer_s: float | None) 
     return max(lower, 0.0), max(upper, 0.0)
 
 
-def runtime_spread(runner, start, soc: float, prediction, load: LoadAhead, model: UncertaintyModel,
+def runtime_spread(runner: PackModel, start: RunStart, soc: float, prediction: RuntimePrediction, load: LoadAhead, model: UncertaintyModel,
                    state_voltage_sigma_v: float, first_voltage_v: float) -> Spread | None:
     """The P10..P90 deviations of a remaining-time prediction (log), by source; None without an end.
 
     Parameters
     ----------
-    runner : PackRunner
+    runner : PackModel
         The pack model.
     start : float or RunState
         The calibrated start the prediction ran from; ``soc`` its SOC.
@@ -424,7 +429,8 @@ def runtime_spread(runner, start, soc: float, prediction, load: LoadAhead, model
     return Spread(lower, upper)
 
 
-def route_charge_sigma_ah(sections, currents=None, point_duration_s: float = DEFAULT_POINT_DURATION_S) -> float:
+def route_charge_sigma_ah(sections: Sequence[RouteSection], currents: RangerCurrents | None = None,
+                          point_duration_s: float = DEFAULT_POINT_DURATION_S) -> float:
     """Standard deviation (Ah) of the charge a route draws: each section's mean current is a sample.
 
     The measured currents of a (payload, slope) set scatter by their standard deviation from one
@@ -468,14 +474,14 @@ class RouteSpread:
         return p50_v + NormalDist().inv_cdf(risk) * self.sigma_v
 
 
-def route_spread(runner, start_soc: float, end_soc: float, route_charge_ah: float, charge_sigma_ah: float,
+def route_spread(runner: PackModel, start_soc: float, end_soc: float, route_charge_ah: float, charge_sigma_ah: float,
                  temperature_k: float, model: UncertaintyModel, state_voltage_sigma_v: float,
-                 end_voltage_at) -> RouteSpread:
+                 end_voltage_at: Callable[[float], float]) -> RouteSpread:
     """Standard deviation (V) of a route's end voltage at the standstill current.
 
     Parameters
     ----------
-    runner : PackRunner
+    runner : PackModel
         The pack model.
     start_soc, end_soc : float
         SOC at the start and (simulated) at the end of the route.
@@ -509,9 +515,9 @@ def route_spread(runner, start_soc: float, end_soc: float, route_charge_ah: floa
     return RouteSpread(math.sqrt(sum(v ** 2 for v in parts.values())), parts)
 
 
-def evaluate_route_at_risk(runner, start, sections, temperature_k: float, *, threshold_v: float,
-                           standstill_current_a: float, risk: float, model: UncertaintyModel,
-                           state_voltage_sigma_v: float, currents=None) -> RouteDecision:
+def evaluate_route_at_risk(runner: PackModel, start: RunStart, sections: Sequence[RouteSection], temperature_k: float,
+                           *, threshold_v: float, standstill_current_a: float, risk: float, model: UncertaintyModel,
+                           state_voltage_sigma_v: float, currents: RangerCurrents | None = None) -> RouteDecision:
     """:func:`~.route.evaluate_route`, accepted only when the pack ends above the threshold with probability >= ``1 - risk``.
 
     ``risk`` 0.5 decides on the P50 voltage alone (the paper's rule); the default 0.1 accepts when

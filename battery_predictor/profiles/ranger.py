@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -397,7 +397,7 @@ class Route:
     def __len__(self) -> int:
         return len(self.sections)
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[RouteSection]:
         return iter(self.sections)
 
     @property

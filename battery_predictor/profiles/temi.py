@@ -255,7 +255,27 @@ def load_usage_config(path: str | Path | None = None) -> TemiUsageConfig:
     path, data = read_yaml_mapping(default_config_path() if path is None else path)
     check_unknown(data, {"robot", "stop_voltage_v", "survey", "durations", "navigation", "currents_a"}, path, "")
     stop_voltage_v = as_float(require(data, "stop_voltage_v", path, ""), path, "stop_voltage_v", minimum=0.0, strict=True)
+    probabilities, survey = _survey_from(data, path)
+    interaction = _interaction_samples_from(data, path)
+    d_min, d_max, speed = _navigation_from(data, path)
+    current_samples = _current_samples_from(data, path)
+    try:
+        return TemiUsageConfig(
+            probabilities=probabilities,
+            interaction_samples_s=np.array(interaction),
+            navigation_duration_range_s=navigation_duration_range_s(d_min, d_max, speed),
+            current_samples_a=current_samples,
+            stop_voltage_v=stop_voltage_v,
+            source=str(path),
+            survey=survey,
+        )
+    except ProfileError as exc:
+        raise ParamsError(str(exc)) from None
 
+
+def _survey_from(data: dict[str, Any], path: Path) -> tuple[dict[str, float], dict[str, Any]]:
+    """The ``survey`` section: the state probabilities it gives (:func:`derive_usage_probabilities`) and the
+    survey itself as the config keeps it (answer counts, idle share, share resolution)."""
     survey = require(data, "survey", path, "")
     check_unknown(survey, {"response_counts", "assignment", "idle_share", "share_resolution", "residual_state"}, path, "survey")
     counts = require(survey, "response_counts", path, "survey")
@@ -289,7 +309,11 @@ def load_usage_config(path: str | Path | None = None) -> TemiUsageConfig:
         )
     except ProfileError as exc:
         raise ParamsError(f"{path}: {exc}") from None
+    return probabilities, {"response_counts": dict(counts), "idle_share": idle_share, "share_resolution": resolution}
 
+
+def _interaction_samples_from(data: dict[str, Any], path: Path) -> list[float]:
+    """``durations.interaction_samples_s``: the measured interaction durations (s) of every service point, pooled."""
     durations = require(data, "durations", path, "")
     check_unknown(durations, {"interaction_samples_s"}, path, "durations")
     groups = require(durations, "interaction_samples_s", path, "durations")
@@ -302,7 +326,11 @@ def load_usage_config(path: str | Path | None = None) -> TemiUsageConfig:
         )
     if len(set(interaction)) < 2:
         raise ParamsError(f"{path}: durations.interaction_samples_s needs at least two distinct durations")
+    return interaction
 
+
+def _navigation_from(data: dict[str, Any], path: Path) -> tuple[float, float, float]:
+    """The ``navigation`` section: (shortest trip m, longest trip m, speed m/s)."""
     navigation = require(data, "navigation", path, "")
     check_unknown(navigation, {"distance_min_m", "distance_max_m", "speed_m_s"}, path, "navigation")
     d_min = as_float(require(navigation, "distance_min_m", path, "navigation"), path, "navigation.distance_min_m",
@@ -313,7 +341,11 @@ def load_usage_config(path: str | Path | None = None) -> TemiUsageConfig:
                      minimum=0.0, strict=True)
     if d_max <= d_min:
         raise ParamsError(f"{path}: navigation.distance_max_m ({d_max:g}) must exceed distance_min_m ({d_min:g})")
+    return d_min, d_max, speed
 
+
+def _current_samples_from(data: dict[str, Any], path: Path) -> dict[str, np.ndarray]:
+    """``currents_a``: the measured pack currents (A) of each usage state."""
     currents = require(data, "currents_a", path, "")
     check_unknown(currents, set(STATES), path, "currents_a")
     current_samples: dict[str, np.ndarray] = {}
@@ -323,19 +355,7 @@ def load_usage_config(path: str | Path | None = None) -> TemiUsageConfig:
         if len(set(values)) < 2:
             raise ParamsError(f"{path}: currents_a.{state} needs at least two distinct currents")
         current_samples[state] = np.array(values)
-
-    try:
-        return TemiUsageConfig(
-            probabilities=probabilities,
-            interaction_samples_s=np.array(interaction),
-            navigation_duration_range_s=navigation_duration_range_s(d_min, d_max, speed),
-            current_samples_a=current_samples,
-            stop_voltage_v=stop_voltage_v,
-            source=str(path),
-            survey={"response_counts": dict(counts), "idle_share": idle_share, "share_resolution": resolution},
-        )
-    except ProfileError as exc:
-        raise ParamsError(str(exc)) from None
+    return current_samples
 
 
 def navigation_duration_range_s(distance_min_m: float, distance_max_m: float, speed_m_s: float) -> tuple[float, float]:

@@ -5,9 +5,12 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from battery_predictor.errors import BagError
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 #: Custom message types the output bag needs definitions for.
 CUSTOM_TYPES = ("battery_predictor_msgs/msg/PackState", "battery_predictor_msgs/msg/RemainingRuntime",
@@ -23,7 +26,7 @@ def _msg_definition_dirs() -> list[Path]:
     return dirs
 
 
-def output_typestore():
+def output_typestore() -> Typestore:
     """The ROS 2 Jazzy type store of ``rosbags`` plus the battery_predictor_msgs types (from their .msg files)."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 

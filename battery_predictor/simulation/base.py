@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from battery_predictor.simulation.load import StepLoad
+
+if TYPE_CHECKING:
+    from battery_predictor.params import PackParams
 
 #: Why a simulation ended.
 TERMINATIONS = ("cell_cutoff", "end_of_load")
@@ -108,6 +111,6 @@ class PackSimulator(Protocol):
 
     name: str
 
-    def simulate(self, params, request: SimulationRequest) -> PackSimResult:
+    def simulate(self, params: PackParams, request: SimulationRequest) -> PackSimResult:
         """Run one simulation; raise :class:`~battery_predictor.errors.SimulationError` on failure."""
         ...

@@ -58,8 +58,9 @@ extension                  what it changes
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -67,6 +68,9 @@ from numpy.typing import ArrayLike
 from battery_predictor.params import PackParams
 from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+if TYPE_CHECKING:
+    import pybamm
 
 #: Gas constant in J/(mol K).
 R_GAS = 8.314462618
@@ -299,10 +303,11 @@ def lithiation_weight(sto: Any) -> Any:
     return np.maximum(x, 0.0) ** 2
 
 
-def _arrhenius_diffusivity(d_ref: float, ea_key: str, t_ref: float, full_key: str | None = None):
+def _arrhenius_diffusivity(d_ref: float, ea_key: str, t_ref: float,
+                           full_key: str | None = None) -> Callable[[pybamm.Symbol, pybamm.Symbol], pybamm.Symbol]:
     import pybamm
 
-    def diffusivity(sto, T):
+    def diffusivity(sto: pybamm.Symbol, T: pybamm.Symbol) -> pybamm.Symbol:
         ea = pybamm.Parameter(ea_key)
         if full_key is not None:
             ea = ea + pybamm.Parameter(full_key) * lithiation_weight(sto)
@@ -311,11 +316,12 @@ def _arrhenius_diffusivity(d_ref: float, ea_key: str, t_ref: float, full_key: st
     return diffusivity
 
 
-def _arrhenius_exchange_current(j0, t_ref: float):
+def _arrhenius_exchange_current(j0: Callable[..., pybamm.Symbol], t_ref: float) -> Callable[..., pybamm.Symbol]:
     """``j0`` (a base-set function of c_e, c_s_surf, c_s_max, T) times the extra Arrhenius factor of :data:`EA_KINETICS`."""
     import pybamm
 
-    def exchange_current(c_e, c_s_surf, c_s_max, T):
+    def exchange_current(c_e: pybamm.Symbol, c_s_surf: pybamm.Symbol, c_s_max: pybamm.Symbol,
+                         T: pybamm.Symbol) -> pybamm.Symbol:
         ea = pybamm.Parameter(EA_KINETICS)
         return j0(c_e, c_s_surf, c_s_max, T) * pybamm.exp(ea / R_GAS * (1.0 / t_ref - 1.0 / T))
 
@@ -342,7 +348,8 @@ def cold_window_scale(loss_per_k: Any, temperature_k: Any, anchor_k: Any = COLD_
     return 1.0 / np.maximum(1.0 - float(loss_per_k) * below, 0.2)
 
 
-def _cold_window_ocp(ocp, sto_charged: float):
+def _cold_window_ocp(ocp: Callable[[pybamm.Symbol], pybamm.Symbol],
+                     sto_charged: float) -> Callable[[pybamm.Symbol], pybamm.Symbol]:
     """An electrode OCP with its window narrowed at the cell's (ambient) temperature (:data:`COLD_WINDOW`).
 
     ``sto_charged`` is the electrode's stoichiometry at 100 % SOC: the OCP is evaluated at
@@ -353,7 +360,7 @@ def _cold_window_ocp(ocp, sto_charged: float):
     """
     import pybamm
 
-    def narrowed(sto):
+    def narrowed(sto: pybamm.Symbol) -> pybamm.Symbol:
         t_amb = pybamm.FunctionParameter("Ambient temperature [K]", {
             "Distance across electrode width [m]": pybamm.Scalar(0.0),
             "Distance across electrode height [m]": pybamm.Scalar(0.0),
@@ -365,7 +372,7 @@ def _cold_window_ocp(ocp, sto_charged: float):
     return narrowed
 
 
-def _charged_stoichiometries(pv) -> tuple[float, float] | None:
+def _charged_stoichiometries(pv: pybamm.ParameterValues) -> tuple[float, float] | None:
     """(x_100, y_100): both electrodes' stoichiometries at 100 % SOC of ``pv`` (None when PyBaMM cannot solve them)."""
     import pybamm
 
@@ -376,10 +383,11 @@ def _charged_stoichiometries(pv) -> tuple[float, float] | None:
         return None
 
 
-def _shifted_ocp(ocp, sign: float):
+def _shifted_ocp(ocp: Callable[[pybamm.Symbol], pybamm.Symbol],
+                 sign: float) -> Callable[[pybamm.Symbol], pybamm.Symbol]:
     import pybamm
 
-    def shifted(sto):
+    def shifted(sto: pybamm.Symbol) -> pybamm.Symbol:
         return ocp(sto) + sign * pybamm.Parameter(HYS_HALF_WIDTH)
 
     return shifted

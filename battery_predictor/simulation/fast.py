@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import time
 from collections import OrderedDict
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -35,6 +36,11 @@ from battery_predictor.simulation.cell_setup import (
 from battery_predictor.simulation.engine.pack import pack_voltage_v
 from battery_predictor.simulation.extensions import series_resistance_factor, weak_group_fraction, weak_group_params
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+if TYPE_CHECKING:
+    import pybamm
+
+    from battery_predictor.params import PackParams
 
 #: Width (s) of the ramp that stands for each current step in the interpolant.
 _EDGE_S = 1e-3
@@ -69,12 +75,12 @@ class FastPackSimulator:
         self.map_thickness = map_thickness
         self.builds = 0
 
-    def _thickness_mappable(self, params) -> bool:
+    def _thickness_mappable(self, params: PackParams) -> bool:
         """True when thickness can be folded into the volume fraction (isothermal SPM, no extra options)."""
         return self.map_thickness and params.model == "SPM" and not params.options and not params.extensions
 
     # ----------------------------------------------------------------- public
-    def simulate(self, params, request: SimulationRequest) -> PackSimResult:
+    def simulate(self, params: PackParams, request: SimulationRequest) -> PackSimResult:
         """Simulate ``request`` on the pack ``params``; see :class:`PackSimulator`."""
         import pybamm
 
@@ -118,7 +124,7 @@ class FastPackSimulator:
             result = self._with_weak_group(params, request, result, tic)
         return result
 
-    def _with_weak_group(self, params, request: SimulationRequest, main: PackSimResult, tic: float) -> PackSimResult:
+    def _with_weak_group(self, params: PackParams, request: SimulationRequest, main: PackSimResult, tic: float) -> PackSimResult:
         """Pack of ``series - 1`` normal groups and one weak group (a second single-group run)."""
         from dataclasses import replace
 
@@ -142,7 +148,8 @@ class FastPackSimulator:
         )
 
     # ---------------------------------------------------------------- helpers
-    def _simulation(self, params, pv, request: SimulationRequest, input_keys: tuple[str, ...], mapped: bool):
+    def _simulation(self, params: PackParams, pv: pybamm.ParameterValues, request: SimulationRequest,
+                    input_keys: tuple[str, ...], mapped: bool) -> tuple[pybamm.Simulation, float, dict[str, float]]:
         import pybamm
 
         load = request.load
@@ -176,7 +183,8 @@ class FastPackSimulator:
             self._cache.popitem(last=False)
         return sim, t_end, built_thickness
 
-    def _result(self, params, request: SimulationRequest, sol, tic: float) -> PackSimResult:
+    def _result(self, params: PackParams, request: SimulationRequest, sol: pybamm.Solution,
+                tic: float) -> PackSimResult:
         load = request.load
         t_sol_end = float(sol.t[-1])
         termination = "cell_cutoff" if sol.termination and "Minimum voltage" in str(sol.termination) else (

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from battery_predictor.simulation.cell_setup import (
 )
 from battery_predictor.simulation.extensions import imbalance_cell_inputs, series_resistance_factor
 from battery_predictor.simulation.load import StepLoad
+
+if TYPE_CHECKING:
+    import pybamm
 
 #: liionpack 0.4.0 passes per-cell inputs by position: the current first, then the others in the
 #: order given, while PyBaMM orders inputs alphabetically. Inputs are therefore passed sorted, and a
@@ -92,7 +95,8 @@ class LiionpackSimulator:
         return self._result(params, request, stepped, out, tic, self.output_variables)
 
     @staticmethod
-    def _result(params, request, stepped, out, tic, output_variables=()) -> PackSimResult:
+    def _result(params: PackParams, request: SimulationRequest, stepped: StepLoad, out: dict[str, Any], tic: float,
+                output_variables: Sequence[str] = ()) -> PackSimResult:
         t_steps = np.asarray(out["Time [s]"], dtype=float)
         if t_steps.size == 0:
             raise SimulationError("liionpack simulation produced no steps")
@@ -195,7 +199,7 @@ def solve_liionpack(params: PackParams, stepped: StepLoad, period_s: float, *, t
         period=f"{period_s} seconds",
     )
 
-    def sim_func(parameter_values):
+    def sim_func(parameter_values: pybamm.ParameterValues) -> pybamm.Simulation:
         return pybamm.Simulation(model=build_model(params, for_liionpack=True), parameter_values=parameter_values,
                                  solver=pybamm.CasadiSolver(mode="safe"))
 

@@ -4,10 +4,15 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import ProfileError
+
+if TYPE_CHECKING:
+    from battery_predictor.profiles.load_profile import LoadProfile
 
 
 @dataclass(frozen=True)
@@ -53,7 +58,7 @@ class StepLoad:
         return cls(np.array([0.0]), np.array([float(current_a)]), float(duration_s))
 
     @classmethod
-    def from_durations(cls, duration_s, current_a) -> StepLoad:
+    def from_durations(cls, duration_s: npt.ArrayLike, current_a: npt.ArrayLike) -> StepLoad:
         """From curve points: durations (s) and currents (A)."""
         d = np.asarray(duration_s, dtype=float)
         if d.size == 0 or np.any(~np.isfinite(d)) or np.any(d <= 0):
@@ -62,7 +67,7 @@ class StepLoad:
         return cls(edges[:-1], np.asarray(current_a, dtype=float), float(edges[-1]))
 
     @classmethod
-    def from_samples(cls, time_s, current_a) -> StepLoad:
+    def from_samples(cls, time_s: npt.ArrayLike, current_a: npt.ArrayLike) -> StepLoad:
         """From measured samples: the current at ``time_s[i]`` holds until ``time_s[i + 1]``.
 
         The last sample holds for the median sample interval.
@@ -75,7 +80,7 @@ class StepLoad:
         return cls(t, np.asarray(current_a, dtype=float), float(t[-1] + dt))
 
     @classmethod
-    def from_profile(cls, profile) -> StepLoad:
+    def from_profile(cls, profile: LoadProfile) -> StepLoad:
         """From a :class:`battery_predictor.profiles.load_profile.LoadProfile` (curve points)."""
         return cls.from_durations(profile.duration_s, profile.current_a)
 
@@ -89,7 +94,7 @@ class StepLoad:
         """All step edges including the end, in s."""
         return np.append(self.start_s, self.end_s)
 
-    def current_at(self, time_s) -> np.ndarray:
+    def current_at(self, time_s: npt.ArrayLike) -> np.ndarray:
         """Current (A) in force at ``time_s`` (right-continuous)."""
         idx = np.searchsorted(self.start_s, np.asarray(time_s, dtype=float), side="right") - 1
         return self.current_a[np.clip(idx, 0, len(self.current_a) - 1)]
@@ -118,7 +123,7 @@ class StepLoad:
         # a last period reaching past end_s carries the remaining charge spread over the period
         return StepLoad(grid[:-1], cur, float(grid[-1]))
 
-    def cumulative_charge_as(self, time_s) -> np.ndarray:
+    def cumulative_charge_as(self, time_s: npt.ArrayLike) -> np.ndarray:
         """Charge drawn from 0 to ``time_s`` in A·s (the last current continues past ``end_s``)."""
         t = np.asarray(time_s, dtype=float)
         edges = self.edges_s()

@@ -27,7 +27,8 @@ from battery_predictor.recording import Recording
 _RELAY_MIN_PAIR_TOLERANCE_S = 0.5
 
 
-def _stamp_ns(log_ns: int, header) -> int:
+def _stamp_ns(log_ns: int, header: Any) -> int:
+    """``header.stamp`` in ns (a deserialised ``std_msgs/Header``, whose class rosbags makes at run time), else ``log_ns``."""
     ns = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
     return ns if ns > 0 else log_ns
 
@@ -140,7 +141,9 @@ def _times(ns: np.ndarray, custom: dict[str, str]) -> np.ndarray:
     return base + (ns - origin).astype(float) / 1e9
 
 
-def _merge_relay(p: Path, prefix: str, got: dict[str, list[tuple[int, Any]]]):
+def _merge_relay(p: Path, prefix: str, got: dict[str, list[tuple[int, Any]]]
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
+    """The relay topics' (stamps ns, V, A, degC, notes): each current paired with the nearest voltage."""
     v_msgs = got.get(prefix + RELAY_SUFFIXES["voltage"], [])
     i_msgs = got.get(prefix + RELAY_SUFFIXES["current"], [])
     t_msgs = got.get(prefix + RELAY_SUFFIXES["temperature"], [])

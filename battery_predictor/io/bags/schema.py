@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 #: Topic layouts (see :mod:`battery_predictor.io.bags`).
 STYLES = ("battery_state", "relay")
@@ -32,7 +36,7 @@ EPOCH_THRESHOLD_S = 1e8
 
 
 @lru_cache(maxsize=1)
-def typestore():
+def typestore() -> Typestore:
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(Stores.ROS2_JAZZY)

@@ -13,12 +13,17 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from battery_predictor.errors import BagError, BatteryPredictorError
 from battery_predictor.io.bags.schema import KEY_SHA256, RESERVED_PREFIX, typestore
+
+if TYPE_CHECKING:
+    from _hashlib import HASH
+
+    from rosbags.rosbag2 import Reader
 
 
 def one_line(text: object) -> str:
@@ -114,7 +119,7 @@ def decode_custom(custom: dict[str, str]) -> dict[str, Any]:
     return out
 
 
-def list_topics(reader) -> dict[str, tuple[str, int]]:
+def list_topics(reader: Reader) -> dict[str, tuple[str, int]]:
     out: dict[str, tuple[str, int]] = {}
     for conn in reader.connections:
         msgtype, count = out.get(conn.topic, (conn.msgtype, 0))
@@ -124,13 +129,13 @@ def list_topics(reader) -> dict[str, tuple[str, int]]:
     return dict(sorted(out.items()))
 
 
-def digest_update(h, log_ns: int, raw: bytes | memoryview) -> None:
+def digest_update(h: HASH, log_ns: int, raw: bytes | memoryview) -> None:
     h.update(int(log_ns).to_bytes(8, "little", signed=False))
     h.update(len(raw).to_bytes(8, "little"))
     h.update(raw)
 
 
-def read_messages(p: Path, reader, topic_names: set[str], custom: dict[str, str]) -> dict[str, list[tuple[int, Any]]]:
+def read_messages(p: Path, reader: Reader, topic_names: set[str], custom: dict[str, str]) -> dict[str, list[tuple[int, Any]]]:
     """Deserialised messages per topic as (log_time_ns, msg), verified against the bag's counts and digests."""
     ts = typestore()
     conns = [c for c in reader.connections if c.topic in topic_names]

@@ -9,7 +9,7 @@ import os
 import shutil
 from contextlib import suppress
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,6 +37,13 @@ from battery_predictor.io.bags.storage import digest_update, one_line
 from battery_predictor.io.paths import portable_path, portable_paths
 from battery_predictor.jsonutil import json_default as _json_default
 from battery_predictor.recording import Recording
+
+if TYPE_CHECKING:
+    from _hashlib import HASH
+
+    from rosbags.interfaces import Connection
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys.store import Typestore
 
 
 def _looks_like_bag_dir(path: Path) -> bool:
@@ -209,15 +216,15 @@ class _DigestingWriter:
     verified by :func:`read_recording_bag`.
     """
 
-    def __init__(self, writer):
+    def __init__(self, writer: Writer) -> None:
         self._writer = writer
-        self._hashes: dict[str, Any] = {}
+        self._hashes: dict[str, HASH] = {}
 
-    def add_connection(self, topic: str, msgtype: str, **kwargs):
+    def add_connection(self, topic: str, msgtype: str, **kwargs: Any) -> Connection:
         self._hashes[topic] = hashlib.sha256()
         return self._writer.add_connection(topic, msgtype, **kwargs)
 
-    def write(self, conn, ns: int, raw: bytes | memoryview) -> None:
+    def write(self, conn: Connection, ns: int, raw: bytes | memoryview) -> None:
         digest_update(self._hashes[conn.topic], ns, raw)
         self._writer.write(conn, ns, raw)
 
@@ -225,13 +232,16 @@ class _DigestingWriter:
         return {topic: h.hexdigest() for topic, h in self._hashes.items()}
 
 
-def _stamp(ts, ns: int):
+def _stamp(ts: Typestore, ns: int) -> Any:
+    """A ``builtin_interfaces/Time`` message (its class is made by rosbags at run time) at ``ns``."""
     time_cls = ts.types["builtin_interfaces/msg/Time"]
     return time_cls(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
 
 
-def _write_battery_state(writer, ts, topic, stamps, v, i, temp_k, meta) -> None:
-    msg_cls = ts.types[BATTERY_STATE_TYPE]
+def _write_battery_state(writer: _DigestingWriter, ts: Typestore, topic: str, stamps: np.ndarray, v: np.ndarray,
+                         i: np.ndarray, temp_k: np.ndarray | None, meta: dict[str, Any]) -> None:
+    # rosbags makes the message classes at run time: their constants are not known to the type checker
+    msg_cls: Any = ts.types[BATTERY_STATE_TYPE]
     header_cls = ts.types["std_msgs/msg/Header"]
     conn = writer.add_connection(topic, BATTERY_STATE_TYPE, typestore=ts)
     msg_current = np.asarray(internal_current_to_battery_state(i), dtype=float)
@@ -266,7 +276,8 @@ def _write_battery_state(writer, ts, topic, stamps, v, i, temp_k, meta) -> None:
         writer.write(conn, ns, ts.serialize_cdr(msg, BATTERY_STATE_TYPE))
 
 
-def _write_relay(writer, ts, prefix, stamps, v, i, temp_k) -> None:
+def _write_relay(writer: _DigestingWriter, ts: Typestore, prefix: str, stamps: np.ndarray, v: np.ndarray,
+                 i: np.ndarray, temp_k: np.ndarray | None) -> None:
     f64 = ts.types[FLOAT64_TYPE]
     temp_cls = ts.types[TEMPERATURE_TYPE]
     header_cls = ts.types["std_msgs/msg/Header"]

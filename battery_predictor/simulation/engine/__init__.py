@@ -17,12 +17,20 @@
   or a carried state for predictions.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
+
+if TYPE_CHECKING:
+    from battery_predictor.simulation.engine.segments import EnginePack
+    from battery_predictor.simulation.engine.simulator import EngineSimulator
 
 __all__ = ["EnginePack", "EngineSimulator", "pack_voltage_v", "series_resistance_factor"]
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> type[EngineSimulator] | type[EnginePack]:
     """``EngineSimulator`` and ``EnginePack`` on first use (the pack voltage alone stays a light import)."""
     if name == "EngineSimulator":
         from battery_predictor.simulation.engine.simulator import EngineSimulator

@@ -15,10 +15,19 @@ from __future__ import annotations
 import math
 import re
 import weakref
+from collections.abc import Callable
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from battery_predictor.simulation.engine.model import CURRENT, THERMAL_ROWS, VOLTAGE_ROWS, LinearSpm
+
+if TYPE_CHECKING:
+    import pybamm
+
+#: A compiled kernel (a Numba dispatcher): NumPy arrays and scalars in, its results written into output arrays.
+Kernel = Callable[..., Any]
 
 #: NumPy functions of the printed voltage expression and their scalar replacements.
 _SCALAR_FUNCTIONS = {
@@ -30,7 +39,9 @@ _ROW = re.compile(r"y\[(\d+):(\d+)\]")
 _NP_CALL = re.compile(r"np\.\w+")
 _NAME = re.compile(r"\b(?:var_m?\d+|y\d+)\b")
 #: Compiled kernels by (printed voltage source, parallel).
-_CACHE: dict[tuple, object] = {}
+_CACHE: dict[tuple, Kernel] = {}
+#: Compiled thermal recurrences and whether they write the voltage, by (rate source, voltage source, parallel).
+_THERMAL_CACHE: dict[tuple, tuple[Kernel, bool]] = {}
 #: Printed voltage source by model (printing takes milliseconds).
 _SOURCES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 #: Printed heat-equation source by model (thermal cells).
@@ -39,7 +50,7 @@ _RATE_SOURCES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 PARALLEL_MIN_SETS = 64
 
 
-def _scalar_lines(symbol, n_rows: int) -> tuple[list[str], str] | None:
+def _scalar_lines(symbol: pybamm.Symbol, n_rows: int) -> tuple[list[str], str] | None:
     """PyBaMM's printed NumPy statements of ``symbol`` as scalar statements on ``y0 .. y{n_rows-1}``.
 
     Returns (statements, name of the result), or None when the expression has no scalar form.
@@ -118,7 +129,7 @@ def _pair_source(lines: list[str], result: str) -> str:
     return f"def cell_voltage_pair({args}):\n    " + "\n    ".join(body) + f"\n    return {out_a}, {out_b}\n"
 
 
-def fused_kernel(model: LinearSpm, *, parallel: bool = False):
+def fused_kernel(model: LinearSpm, *, parallel: bool = False) -> Kernel | None:
     """The compiled run kernel for ``model``'s voltage, or None (no Numba, or no scalar form).
 
     ``parallel`` selects the variant that spreads the sets over the cores (its compilation
@@ -139,7 +150,7 @@ def fused_kernel(model: LinearSpm, *, parallel: bool = False):
     return _CACHE[key]
 
 
-def thermal_kernel(model: LinearSpm, *, parallel: bool = False):
+def thermal_kernel(model: LinearSpm, *, parallel: bool = False) -> tuple[Kernel, bool] | None:
     """The compiled thermal recurrence for ``model``'s heat equation, or None (no Numba, or no scalar form).
 
     When the voltage has a scalar form too the kernel also writes the voltage at every step start
@@ -158,9 +169,9 @@ def thermal_kernel(model: LinearSpm, *, parallel: bool = False):
         _SOURCES[model] = scalar_voltage_source(model) or ""
     voltage_source = _SOURCES[model]
     key = ("thermal", source, voltage_source, bool(parallel))
-    if key not in _CACHE:
-        _CACHE[key] = compile_thermal_kernel(numba, source, voltage_source, bool(parallel))
-    return _CACHE[key]
+    if key not in _THERMAL_CACHE:
+        _THERMAL_CACHE[key] = compile_thermal_kernel(numba, source, voltage_source, bool(parallel))
+    return _THERMAL_CACHE[key]
 
 
 def forget_thermal_kernel(model: LinearSpm) -> None:
@@ -173,7 +184,7 @@ def forget_kernel(model: LinearSpm) -> None:
     _SOURCES[model] = ""
 
 
-def _compile(numba, source: str, parallel: bool):
+def _compile(numba: ModuleType, source: str, parallel: bool) -> Kernel:
     namespace: dict = {"math": math}
     exec(compile(source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - code printed by PyBaMM from the model
     voltage = numba.njit(fastmath=False)(namespace["cell_voltage"])
@@ -290,7 +301,8 @@ def _compile(numba, source: str, parallel: bool):
     return kernel
 
 
-def compile_thermal_kernel(numba, rate_source: str, voltage_source: str, parallel: bool):
+def compile_thermal_kernel(numba: ModuleType, rate_source: str, voltage_source: str,
+                           parallel: bool) -> tuple[Kernel, bool]:
     """The compiled recurrence for a heat equation printed as ``cell_rate(y0, ..., y7)`` (:func:`scalar_rate_source`).
 
     With a ``voltage_source`` (``cell_voltage`` and ``cell_voltage_pair``, above) the kernel writes

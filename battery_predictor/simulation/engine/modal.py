@@ -17,9 +17,12 @@ sets and modes otherwise).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.engine.model import LinearSpm, ParticleBlock
@@ -61,7 +64,7 @@ class ModalSystem:
     def n_modes(self) -> int:
         return int(self.eigenvalues_per_s.size)
 
-    def electrode_factors(self, negative, positive) -> np.ndarray:
+    def electrode_factors(self, negative: npt.ArrayLike, positive: npt.ArrayLike) -> np.ndarray:
         """Per-mode array from per-electrode values of shape (n_sets,): shape (n_sets, n_modes)."""
         neg = np.asarray(negative, dtype=float).reshape(-1, 1)
         pos = np.asarray(positive, dtype=float).reshape(-1, 1)
@@ -118,7 +121,7 @@ def modal_system(model: LinearSpm) -> ModalSystem:
                        from_modal=(vecs[0], vecs[1]), n_negative=n_neg)
 
 
-def step_coefficients(lam: np.ndarray, duration_s) -> tuple[np.ndarray, np.ndarray]:
+def step_coefficients(lam: np.ndarray, duration_s: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``exp(lam h)`` and ``phi(lam, h)`` elementwise (broadcast), exact for ``lam = 0``."""
     x = lam * duration_s
     decay = np.exp(x)
@@ -129,7 +132,8 @@ def step_coefficients(lam: np.ndarray, duration_s) -> tuple[np.ndarray, np.ndarr
 
 # --------------------------------------------------------------------------- recurrences
 def _boundary_states_numpy(lam: np.ndarray, drive: np.ndarray, z0: np.ndarray, duration_s: np.ndarray,
-                           current_a: np.ndarray, weights: np.ndarray, stride: int):
+                           current_a: np.ndarray, weights: np.ndarray,
+                           stride: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """NumPy recurrence; see :func:`boundary_surfaces`."""
     n_sets, n_modes = z0.shape
     n_steps = duration_s.size
@@ -166,7 +170,7 @@ def _boundary_states_numpy(lam: np.ndarray, drive: np.ndarray, z0: np.ndarray, d
     return surfaces, checkpoints, z
 
 
-def _numba_kernel():
+def _numba_kernel() -> Callable[..., None] | None:
     """The compiled recurrence, or None without Numba."""
     try:
         import numba
@@ -175,16 +179,17 @@ def _numba_kernel():
     return _compile(numba)
 
 
-_KERNEL_CACHE: dict[str, object] = {}
+_KERNEL_CACHE: dict[str, Callable[..., None]] = {}
 
 
-def _compile(numba):
+def _compile(numba: ModuleType) -> Callable[..., None]:
     if "kernel" in _KERNEL_CACHE:
         return _KERNEL_CACHE["kernel"]
 
     @numba.njit(cache=True, fastmath=False)
-    def kernel(lam, drive, z0, duration_s, current_a, weights, stride, surfaces, checkpoints,
-               z_end):  # pragma: no cover - compiled
+    def kernel(lam: np.ndarray, drive: np.ndarray, z0: np.ndarray, duration_s: np.ndarray, current_a: np.ndarray,
+               weights: np.ndarray, stride: int, surfaces: np.ndarray, checkpoints: np.ndarray,
+               z_end: np.ndarray) -> None:  # pragma: no cover - compiled
         n_sets, n_modes = z0.shape
         n_steps = duration_s.shape[0]
         decay = np.empty(n_modes)
@@ -233,7 +238,8 @@ def numba_available() -> bool:
 
 
 def boundary_surfaces(lam: np.ndarray, drive: np.ndarray, z0: np.ndarray, duration_s: np.ndarray,
-                      current_a: np.ndarray, weights: np.ndarray, *, stride: int = 64, backend: str = "auto"):
+                      current_a: np.ndarray, weights: np.ndarray, *, stride: int = 64,
+                      backend: str = "auto") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Surface values at every step boundary, exactly (zero-order hold).
 
     Parameters

@@ -39,12 +39,20 @@ the ambient temperature (:class:`LumpedThermal`).
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.cell_setup import build_model, prepared_parameter_values, quiet_pybamm
+
+if TYPE_CHECKING:
+    import pybamm
+
+    from battery_predictor.params import PackParams
 
 CURRENT = "Current function [A]"
 C_N0 = "Initial concentration in negative electrode [mol.m-3]"
@@ -109,7 +117,7 @@ class ParticleBlock:
     scale_mol_m3: float
 
 
-def _evaluate_rows(evaluator, rows) -> np.ndarray:
+def _evaluate_rows(evaluator: Callable[[float, np.ndarray], Any], rows: Sequence[npt.ArrayLike]) -> np.ndarray:
     """An expression on stacked input rows, elementwise over the rows broadcast together."""
     shape = np.broadcast_shapes(*(np.shape(row) for row in rows))
     size = int(np.prod(shape)) if shape else 1
@@ -141,15 +149,16 @@ class LumpedThermal:
 
     rate_symbol: object
 
-    def temperature_rate_k_s(self, surface_n, surface_p, current_a, temperature_k, ambient_temperature_k,
-                             eps_n, eps_p, height_m) -> np.ndarray:
+    def temperature_rate_k_s(self, surface_n: npt.ArrayLike, surface_p: npt.ArrayLike, current_a: npt.ArrayLike,
+                             temperature_k: npt.ArrayLike, ambient_temperature_k: npt.ArrayLike,
+                             eps_n: npt.ArrayLike, eps_p: npt.ArrayLike, height_m: npt.ArrayLike) -> np.ndarray:
         """``dT/dt`` in K/s, elementwise over broadcast arguments (surface stoichiometries, cell current in A,
         cell and ambient temperature in K, the voltage's volume fractions and electrode height in m)."""
         rows = (surface_n, surface_p, current_a, temperature_k, eps_n, eps_p, height_m, ambient_temperature_k)
         return _evaluate_rows(self._evaluator, rows)
 
     @functools.cached_property
-    def _evaluator(self):
+    def _evaluator(self) -> pybamm.EvaluatorPython:
         import pybamm
 
         return pybamm.EvaluatorPython(self.rate_symbol)
@@ -183,7 +192,8 @@ class LinearSpm:
     thermal: LumpedThermal | None = None
 
     def cell_voltage_v(self, surface_n: np.ndarray, surface_p: np.ndarray, current_a: np.ndarray | float,
-                       temperature_k, eps_n=None, eps_p=None, height_m=None) -> np.ndarray:
+                       temperature_k: npt.ArrayLike, eps_n: npt.ArrayLike | None = None,
+                       eps_p: npt.ArrayLike | None = None, height_m: npt.ArrayLike | None = None) -> np.ndarray:
         """Terminal voltage (V) of the cell at surface states and cell currents (A), elementwise.
 
         ``surface_*`` are surface stoichiometries (PyBaMM's state is the concentration over its
@@ -197,7 +207,7 @@ class LinearSpm:
         return _evaluate_rows(self._evaluator, rows)
 
     @functools.cached_property
-    def _evaluator(self):
+    def _evaluator(self) -> pybamm.EvaluatorPython:
         """The voltage expression as generated NumPy code (PyBaMM's ``EvaluatorPython``)."""
         import pybamm
 
@@ -209,7 +219,7 @@ class LinearSpm:
                      for blk, c in zip(self.blocks, (c_n0_mol_m3, c_p0_mol_m3)))
 
 
-def _built_simulation(params):
+def _built_simulation(params: PackParams) -> tuple[pybamm.BaseModel, dict[str, float], float]:
     import pybamm
 
     if params.model != "SPM":
@@ -239,7 +249,7 @@ def _built_simulation(params):
     return sim.built_model, built, cutoff
 
 
-def diffusivity_m2_s(pv, key: str, temperature_k: float) -> float:
+def diffusivity_m2_s(pv: pybamm.ParameterValues, key: str, temperature_k: float) -> float:
     """A particle diffusivity of parameter values ``pv`` (m2/s) at ``temperature_k`` (a constant or PyBaMM's function).
 
     Functions are evaluated at the stoichiometries :data:`STOICHIOMETRY_PROBES` and must not depend on
@@ -283,7 +293,7 @@ def require_constant_in_stoichiometry(key: str, values: np.ndarray, where: str) 
                               "engine needs a diffusivity constant in it")
 
 
-def _block_slices(model) -> dict[str, slice]:
+def _block_slices(model: pybamm.BaseModel) -> dict[str, slice]:
     slices = {}
     for var, sl in model.y_slices.items():
         for electrode, name in _PARTICLE_VARIABLES.items():
@@ -294,7 +304,7 @@ def _block_slices(model) -> dict[str, slice]:
     return slices
 
 
-def _linear_map(symbol, n_states: int, inputs: dict) -> tuple[np.ndarray, np.ndarray]:
+def _linear_map(symbol: pybamm.Symbol, n_states: int, inputs: dict) -> tuple[np.ndarray, np.ndarray]:
     """(Jacobian, value at y = 0 with the current 1 A) of a symbol that must be affine in y and I."""
     zero = np.zeros((n_states, 1))
     idle = dict(inputs, **{CURRENT: 0.0})
@@ -315,7 +325,7 @@ def _linear_map(symbol, n_states: int, inputs: dict) -> tuple[np.ndarray, np.nda
     return jac, unit
 
 
-def _replace(symbol, rule):
+def _replace(symbol: pybamm.Symbol, rule: Callable[[pybamm.Symbol], pybamm.Symbol | None]) -> pybamm.Symbol:
     """A copy of ``symbol`` with every subtree for which ``rule`` returns a symbol replaced by it."""
     new = rule(symbol)
     if new is not None:
@@ -337,7 +347,7 @@ class _TemperatureState:
     reference_k: float
 
 
-def _temperature_state(model) -> _TemperatureState | None:
+def _temperature_state(model: pybamm.BaseModel) -> _TemperatureState | None:
     for var, sl in model.y_slices.items():
         if var.name == _TEMPERATURE_VARIABLE:
             if sl[0].stop - sl[0].start != 1:
@@ -348,14 +358,15 @@ def _temperature_state(model) -> _TemperatureState | None:
     return None
 
 
-def _temperature_as(symbol, temperature: _TemperatureState | None, value):
+def _temperature_as(symbol: pybamm.Symbol, temperature: _TemperatureState | None,
+                    value: pybamm.Symbol) -> pybamm.Symbol:
     """``symbol`` with PyBaMM's temperature state replaced by its scaled form of ``value`` (a symbol in K)."""
     import pybamm
 
     if temperature is None:
         return symbol
 
-    def rule(sym):
+    def rule(sym: pybamm.Symbol) -> pybamm.Symbol | None:
         if isinstance(sym, pybamm.StateVector) and sym.y_slices[0].start == temperature.start:
             scaled = (value - pybamm.Scalar(temperature.reference_k)) / pybamm.Scalar(temperature.scale_k)
             return pybamm.Vector(np.ones(1)) * scaled  # a column like the state it replaces
@@ -364,8 +375,9 @@ def _temperature_as(symbol, temperature: _TemperatureState | None, value):
     return _replace(symbol, rule)
 
 
-def _rows_symbol(expression, slices: dict[str, slice], rows_names: tuple[str, ...],
-                 temperature: _TemperatureState | None, ambient_row: str | None):
+def _rows_symbol(expression: pybamm.Symbol, slices: dict[str, slice], rows_names: tuple[str, ...],
+                 temperature: _TemperatureState | None,
+                 ambient_row: str | None) -> tuple[pybamm.Symbol, dict[str, np.ndarray]]:
     """A discretised expression with surface values, inputs and the temperature as rows of ``rows_names``.
 
     The temperature state (a thermal model) becomes the row ``T_AMB`` (the cell temperature);
@@ -382,7 +394,7 @@ def _rows_symbol(expression, slices: dict[str, slice], rows_names: tuple[str, ..
     elif temperature is not None:
         inputs.pop(T_AMB)  # the cell temperature is the state: the ambient must not enter
 
-    def rule(sym):
+    def rule(sym: pybamm.Symbol) -> pybamm.Symbol | None:
         if isinstance(sym, pybamm.MatrixMultiplication) and isinstance(sym.right, pybamm.StateVector):
             start = sym.right.y_slices[0].start
             if start not in by_start or sym.shape != (1, 1):
@@ -412,12 +424,13 @@ def _rows_symbol(expression, slices: dict[str, slice], rows_names: tuple[str, ..
     return _replace(expression, rule), surface_rows
 
 
-def _voltage_symbol(model, slices: dict[str, slice], temperature: _TemperatureState | None = None):
+def _voltage_symbol(model: pybamm.BaseModel, slices: dict[str, slice],
+                    temperature: _TemperatureState | None = None) -> tuple[pybamm.Symbol, dict[str, np.ndarray]]:
     """PyBaMM's discretised voltage with surface values and inputs as rows of :data:`VOLTAGE_ROWS`."""
     return _rows_symbol(model.variables["Voltage [V]"], slices, VOLTAGE_ROWS, temperature, None)
 
 
-def _lumped_thermal(model, slices: dict[str, slice], temperature: _TemperatureState,
+def _lumped_thermal(model: pybamm.BaseModel, slices: dict[str, slice], temperature: _TemperatureState,
                     voltage_rows: dict[str, np.ndarray]) -> LumpedThermal:
     """PyBaMM's lumped heat equation as ``dT/dt`` (K/s) on the rows of :data:`THERMAL_ROWS`."""
     import pybamm
@@ -430,7 +443,7 @@ def _lumped_thermal(model, slices: dict[str, slice], temperature: _TemperatureSt
     return LumpedThermal(rate_symbol=pybamm.Scalar(temperature.scale_k) * rate)
 
 
-def extract_linear_spm(params) -> LinearSpm:
+def extract_linear_spm(params: PackParams) -> LinearSpm:
     """PyBaMM's discretised SPM of ``params``' cell as a :class:`LinearSpm`.
 
     Model options and extensions are taken as PyBaMM builds them; the extraction checks what it
@@ -475,7 +488,7 @@ def extract_linear_spm(params) -> LinearSpm:
                      lower_cutoff_v=cutoff, thermal=thermal)
 
 
-def _check_surface(surface, sl: slice, row_mol_m3: np.ndarray, n_states: int, inputs: dict, electrode: str) -> None:
+def _check_surface(surface: pybamm.Symbol, sl: slice, row_mol_m3: np.ndarray, n_states: int, inputs: dict, electrode: str) -> None:
     """The surface concentration variable must be the voltage's surface row times the scale, without feed-through."""
     jac, unit = _linear_map(surface, n_states, inputs)
     want = np.zeros(n_states)
@@ -488,7 +501,7 @@ def _check_surface(surface, sl: slice, row_mol_m3: np.ndarray, n_states: int, in
 _C_MAX_CHECK_FACTORS = (1.13, 0.91)
 
 
-def c_max_scaling_holds(params) -> bool:
+def c_max_scaling_holds(params: PackParams) -> bool:
     """True when changing ``params``' maximum concentrations is the scaling of the module docstring.
 
     Compares a PyBaMM rebuild with changed maximum concentrations against the scaled extraction:

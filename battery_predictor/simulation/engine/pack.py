@@ -15,6 +15,7 @@ activation energy (extension ``temperature``).
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 #: Gas constant in J/(mol K).
 GAS_CONSTANT_J_MOL_K = 8.314462618
@@ -22,7 +23,7 @@ GAS_CONSTANT_J_MOL_K = 8.314462618
 REFERENCE_TEMPERATURE_K = 298.15
 
 
-def series_resistance_factor(temperature_k, activation_energy_j_mol: float,
+def series_resistance_factor(temperature_k: npt.ArrayLike, activation_energy_j_mol: float,
                              reference_temperature_k: float = REFERENCE_TEMPERATURE_K) -> np.ndarray:
     """Arrhenius factor ``exp(E/R (1/T - 1/T_ref))`` of the series resistance (1 when ``E`` is 0).
 
@@ -42,7 +43,8 @@ def series_resistance_factor(temperature_k, activation_energy_j_mol: float,
     return np.exp(activation_energy_j_mol / GAS_CONSTANT_J_MOL_K * inverse_k)
 
 
-def pack_voltage_v(cell_voltage_v, pack_current_a, *, series: int, r_eq_ohm, weak_cell_voltage_v=None) -> np.ndarray:
+def pack_voltage_v(cell_voltage_v: npt.ArrayLike, pack_current_a: npt.ArrayLike, *, series: int,
+                   r_eq_ohm: npt.ArrayLike, weak_cell_voltage_v: npt.ArrayLike | None = None) -> np.ndarray:
     """Pack terminal voltage in V.
 
     Parameters

@@ -15,12 +15,14 @@ voltage that dips below the cut-off and recovers within one constant-current ste
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
-from battery_predictor.simulation.engine.kernel import PARALLEL_MIN_SETS, forget_kernel, fused_kernel
+from battery_predictor.simulation.engine.kernel import PARALLEL_MIN_SETS, Kernel, forget_kernel, fused_kernel
 from battery_predictor.simulation.engine.modal import (
     ModalSystem,
     boundary_surfaces,
@@ -140,7 +142,8 @@ class _Batch:
     heat_rate: np.ndarray | None = None
 
 
-def _batch(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: int, temperature_k) -> _Batch:
+def _batch(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: int,
+           temperature_k: npt.ArrayLike) -> _Batch:
     f = sets.arrays(n_sets)
     a_n = f["diffusivity_n"] / f["radius_n"] ** 2
     a_p = f["diffusivity_p"] / f["radius_p"] ** 2
@@ -168,10 +171,12 @@ def _voltage(model: LinearSpm, batch: _Batch, surfaces: np.ndarray, current_a: n
                                 batch.eps_n[col], batch.eps_p[col], batch.height_m[col])
 
 
-def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, *, c_n0_mol_m3=None,
-              c_p0_mol_m3=None, temperature_k, sets: ParameterSets | None = None, backend: str = "auto",
+def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, cell_current_a: npt.ArrayLike, *,
+              c_n0_mol_m3: npt.ArrayLike | None = None, c_p0_mol_m3: npt.ArrayLike | None = None,
+              temperature_k: npt.ArrayLike, sets: ParameterSets | None = None, backend: str = "auto",
               keep_states: bool = False, initial_state: tuple[np.ndarray, np.ndarray] | None = None,
-              initial_temperature_k=None, diffusivity_temperature=None) -> CellRuns:
+              initial_temperature_k: npt.ArrayLike | None = None,
+              diffusivity_temperature: DiffusivityTemperature | None = None) -> CellRuns:
     """Run cells from uniform particles through constant-current steps until the cut-off.
 
     Parameters
@@ -222,7 +227,8 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
     if (initial_state is None) == (c_n0_mol_m3 is None or c_p0_mol_m3 is None):
         raise SimulationError("give either both initial concentrations or an initial state")
     n_state_sets = 1 if initial_state is None else max(np.atleast_2d(y).shape[0] for y in initial_state)
-    n_sets = max(sets.size(), np.size(c_n0_mol_m3), np.size(c_p0_mol_m3), np.size(temperature_k), n_state_sets)
+    n_c0 = max(1 if c is None else np.size(c) for c in (c_n0_mol_m3, c_p0_mol_m3))
+    n_sets = max(sets.size(), n_c0, np.size(temperature_k), n_state_sets)
     batch = _batch(model, modal, sets, n_sets, temperature_k)
     if initial_state is None:
         c_max_n = model.blocks[0].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_n, dtype=float), (n_sets,))
@@ -258,7 +264,7 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s, cell_current_a, 
                          stride=1 if keep_states else 64)
 
 
-def _run_fused(kernel, model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.ndarray, duration_s: np.ndarray,
+def _run_fused(kernel: Kernel, model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.ndarray, duration_s: np.ndarray,
                current: np.ndarray, edges: np.ndarray) -> CellRuns:
     n_sets, n_steps = z0.shape[0], duration_s.size
     start_v = np.full((n_sets, n_steps), np.nan)
@@ -412,7 +418,8 @@ def _run_thermal(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nda
                                                                      sub.temperature_k, sub.eps_n, sub.eps_p,
                                                                      sub.height_m)
 
-            def euler_temperature(tau, s_tau, t_k=t_k, r_k=r_k):
+            def euler_temperature(tau: np.ndarray, s_tau: np.ndarray, t_k: np.ndarray = t_k,
+                                  r_k: np.ndarray = r_k) -> np.ndarray:
                 return t_k + tau * r_k
 
             tau = _cutoff_in_step(model, modal, _Batch(lam, sub.drive, sub.eps_n, sub.eps_p, sub.height_m, t_k),
@@ -441,15 +448,15 @@ def _run_thermal(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nda
                     final_state=modal.block_states(z_final), extra=extra)
 
 
-def _temperature_within(model: LinearSpm, batch: _Batch, s_k: np.ndarray, s_tau: np.ndarray, current_a, t_k: np.ndarray,
-                        tau) -> np.ndarray:
+def _temperature_within(model: LinearSpm, batch: _Batch, s_k: np.ndarray, s_tau: np.ndarray,
+                        current_a: np.ndarray | float, t_k: np.ndarray, tau: np.ndarray | float) -> np.ndarray:
     """Cell temperature (K) ``tau`` into a step: Heun's step of length ``tau`` from ``(s_k, t_k)`` (surfaces
     (..., 2) at the step start and at ``tau``), the recurrence's own rule, so that it needs nothing past ``tau``
     (the step's end may lie past a cut-off where the cell emptied)."""
     thermal = model.thermal
     assert thermal is not None  # a thermal run
 
-    def rate(s, t):
+    def rate(s: np.ndarray, t: np.ndarray) -> np.ndarray:
         return batch.heat_rate * thermal.temperature_rate_k_s(s[..., 0], s[..., 1], current_a, t,
                                                                     batch.temperature_k, batch.eps_n, batch.eps_p,
                                                                     batch.height_m)
@@ -468,7 +475,8 @@ def _take(batch: _Batch, idx: np.ndarray) -> _Batch:
     return _Batch(*(getattr(batch, name)[idx] for name in batch.__dataclass_fields__))
 
 
-def _within_step(modal: ModalSystem, batch: _Batch, z_k: np.ndarray, tau_s: np.ndarray, current_a: np.ndarray):
+def _within_step(modal: ModalSystem, batch: _Batch, z_k: np.ndarray, tau_s: np.ndarray,
+                 current_a: np.ndarray) -> np.ndarray:
     """Surface values (n, 2) at ``tau_s`` into the step from modal states ``z_k`` (n, n_modes)."""
     decay, phi = step_coefficients(batch.lam, tau_s[:, None])
     z = decay * z_k + phi * batch.drive * current_a[:, None]
@@ -476,14 +484,15 @@ def _within_step(modal: ModalSystem, batch: _Batch, z_k: np.ndarray, tau_s: np.n
 
 
 def _cutoff_in_step(model: LinearSpm, modal: ModalSystem, batch: _Batch, z_k: np.ndarray, h_s: np.ndarray,
-                    current_a: np.ndarray, temperature_at=None) -> np.ndarray:
+                    current_a: np.ndarray,
+                    temperature_at: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None) -> np.ndarray:
     """Time into the step (s) at which the voltage meets the cut-off (Illinois regula falsi, vectorised).
 
     With ``temperature_at(tau, surfaces)`` (thermal cells) the temperature inside the step is its value.
     """
     cut = model.lower_cutoff_v
 
-    def f(tau):
+    def f(tau: np.ndarray) -> np.ndarray:
         s = _within_step(modal, batch, z_k, tau, current_a)
         temperature_k = batch.temperature_k if temperature_at is None else temperature_at(tau, s)
         return model.cell_voltage_v(s[:, 0], s[:, 1], current_a, temperature_k, batch.eps_n, batch.eps_p,
@@ -511,7 +520,8 @@ def _cutoff_in_step(model: LinearSpm, modal: ModalSystem, batch: _Batch, z_k: np
     return 0.5 * (lo + hi)
 
 
-def states_at_times(runs: CellRuns, modal: ModalSystem, duration_s, cell_current_a, time_s) -> np.ndarray:
+def states_at_times(runs: CellRuns, modal: ModalSystem, duration_s: npt.ArrayLike, cell_current_a: npt.ArrayLike,
+                    time_s: npt.ArrayLike) -> np.ndarray:
     """Surface values (n_sets, n_times, 2) at ``time_s`` (right-continuous), from a run that kept its states."""
     if runs.extra.get("stride") != 1:
         raise SimulationError("states at arbitrary times need a run that kept every state (keep_states=True)")
@@ -532,8 +542,8 @@ def states_at_times(runs: CellRuns, modal: ModalSystem, duration_s, cell_current
     return out
 
 
-def voltages_at_times(model: LinearSpm, runs: CellRuns, modal: ModalSystem, duration_s, cell_current_a,
-                      time_s) -> np.ndarray:
+def voltages_at_times(model: LinearSpm, runs: CellRuns, modal: ModalSystem, duration_s: npt.ArrayLike,
+                      cell_current_a: npt.ArrayLike, time_s: npt.ArrayLike) -> np.ndarray:
     """Cell voltage (V, n_sets x n_times) at ``time_s`` under the current in force there (right-continuous).
 
     Times on a step start reuse the run's start voltages; the others are stepped into their step.
@@ -553,7 +563,7 @@ def voltages_at_times(model: LinearSpm, runs: CellRuns, modal: ModalSystem, dura
     return out
 
 
-def _thermal_at_times(runs: CellRuns, modal: ModalSystem, time_s) -> tuple[np.ndarray, np.ndarray]:
+def _thermal_at_times(runs: CellRuns, modal: ModalSystem, time_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Surface values (n_sets, n_times, 2) and cell temperatures (K, (n_sets, n_times)) of a thermal run that
     kept every state, at ``time_s`` (right-continuous; the temperature linear inside each sub-step)."""
     steps: _ThermalSteps = runs.extra["thermal_steps"]
@@ -580,7 +590,7 @@ def _thermal_at_times(runs: CellRuns, modal: ModalSystem, time_s) -> tuple[np.nd
     return surfaces, temperature_k
 
 
-def temperatures_at_times(runs: CellRuns, modal: ModalSystem, time_s) -> np.ndarray:
+def temperatures_at_times(runs: CellRuns, modal: ModalSystem, time_s: npt.ArrayLike) -> np.ndarray:
     """Cell temperature (K, (n_sets, n_times)) at ``time_s``: the lumped temperature of a thermal run that kept
     every state, else the run's isothermal temperature."""
     time_s = np.asarray(time_s, dtype=float)

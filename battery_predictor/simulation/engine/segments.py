@@ -22,10 +22,12 @@ normal cells' temperature at every sample.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.cell_setup import prepared_parameter_values
@@ -33,6 +35,7 @@ from battery_predictor.simulation.engine.modal import modal_system, step_coeffic
 from battery_predictor.simulation.engine.model import diffusivity_m2_s, extract_linear_spm
 from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
 from battery_predictor.simulation.engine.run import (
+    CellRuns,
     ParameterSets,
     run_cells,
     states_at_times,
@@ -43,6 +46,9 @@ from battery_predictor.simulation.engine.simulator import CELL_MODEL_EXTENSIONS,
 from battery_predictor.simulation.engine.state import StoichiometryWindow
 from battery_predictor.simulation.engine.thermal import DiffusivityTemperature, diffusivity_temperature
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+if TYPE_CHECKING:
+    from battery_predictor.params import PackParams
 
 #: Stoichiometries a starting SOC must keep away from 0 and 1.
 _SOC_MARGIN = 0.02
@@ -155,9 +161,10 @@ class EnginePack:
         Engine backend (``"auto"``, ``"numba"``, ``"numpy"``).
     """
 
-    def __init__(self, params, *, current_offset_a: float = 0.0, weak_fraction: float | None = None,
+    def __init__(self, params: PackParams, *, current_offset_a: float = 0.0, weak_fraction: float | None = None,
                  series_activation_j_mol: float | None = None, samples_per_segment: int = 4,
-                 max_spacing_s: float = 30.0, backend: str = "auto", resistance_factor=None) -> None:
+                 max_spacing_s: float = 30.0, backend: str = "auto",
+                 resistance_factor: Callable[[npt.ArrayLike], npt.ArrayLike] | None = None) -> None:
         outside = sorted(set(params.extensions) - set(CELL_MODEL_EXTENSIONS) - {"cell_imbalance", "temperature"})
         if params.model != "SPM" or outside:
             raise SimulationError(f"the engine does not cover model {params.model} with extensions {outside}")
@@ -223,7 +230,7 @@ class EnginePack:
         return state.soc_start - state.charge_ah / self.capacity_ah
 
     # ------------------------------------------------------------------- runs
-    def run(self, start: float | EngineState, segments, temperature_k: float) -> EngineSegmentRun:
+    def run(self, start: float | EngineState, segments: npt.ArrayLike, temperature_k: float) -> EngineSegmentRun:
         """Run ``segments`` = [(duration_s, pack_current_a), ...] at ``temperature_k`` from an SOC or a state.
 
         A cell below its cut-off as soon as the first segment's current flows gives a run of one NaN
@@ -242,7 +249,8 @@ class EnginePack:
             soc_start, charge0 = float(start), 0.0
         return self._samples(runs, duration_s, pack_a, cell_a, soc_start, charge0)
 
-    def _inputs(self, segments, temperature_k: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+    def _inputs(self, segments: npt.ArrayLike,
+                temperature_k: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Checked segment durations (s), pack and cell currents (A) and the kernel's common arguments."""
         segs = np.asarray(segments, dtype=float).reshape(-1, 2)
         # contiguous columns: the compiled kernel has one specialisation for every caller (and the warm-up)
@@ -257,7 +265,7 @@ class EnginePack:
         return duration_s, pack_a, cell_a, dict(temperature_k=float(temperature_k), backend=self.backend, sets=sets)
 
     def _run_cells(self, start: float | EngineState, duration_s: np.ndarray, cell_a: np.ndarray,
-                   common: dict[str, Any]):
+                   common: dict[str, Any]) -> CellRuns:
         """The kernel's run of every group from an SOC or a carried state (with its weak group)."""
         if isinstance(start, EngineState):
             particles = start.particles
@@ -270,7 +278,7 @@ class EnginePack:
         c_n, c_p = self.concentrations(float(start))
         return run_cells(self.model, self.modal, duration_s, cell_a, c_n0_mol_m3=c_n, c_p0_mol_m3=c_p, **common)
 
-    def run_end(self, start: float | EngineState, segments, temperature_k: float) -> EngineRunEnd:
+    def run_end(self, start: float | EngineState, segments: npt.ArrayLike, temperature_k: float) -> EngineRunEnd:
         """Only the end of :meth:`run`: its last pack voltage, whether and when it reached the cut-off.
 
         The same recurrence and voltage expression as :meth:`run`, without the samples inside the
@@ -294,7 +302,8 @@ class EnginePack:
                                 r_eq_ohm=r_eq, weak_cell_voltage_v=cell_v[1] if cell_v.size > 1 else None)
         return EngineRunEnd(float(v_pack), False, end_s)
 
-    def _samples(self, runs, duration_s, pack_a, cell_a, soc_start: float, charge0: float) -> EngineSegmentRun:
+    def _samples(self, runs: CellRuns, duration_s: np.ndarray, pack_a: np.ndarray, cell_a: np.ndarray,
+                 soc_start: float, charge0: float) -> EngineSegmentRun:
         first = int(np.argmin(runs.end_time_s))  # the group that reaches its cut-off first ends the pack's run
         end_s = float(runs.end_time_s[first])
         reached = bool(runs.reached_cutoff[first])
@@ -343,7 +352,7 @@ class EnginePack:
         return EngineSegmentRun(time_s=time_s, pack_voltage_v=v_pack, pack_current_a=pack_i, segment_end_index=ends,
                                 reached_cutoff=reached, end_time_s=end_s, final_state=state)
 
-    def resistance_factor(self, temperature_k):
+    def resistance_factor(self, temperature_k: npt.ArrayLike) -> np.ndarray:
         """Factor on ``R_eq`` at the cell temperature (K; float or array)."""
         if self._resistance_factor is not None:
             return np.asarray(self._resistance_factor(temperature_k), dtype=float)
@@ -367,7 +376,7 @@ class EnginePack:
             self._tables[temperature_k] = diffusivity_temperature(self._pv, DIFFUSIVITY_KEYS, temperature_k)
         return self._tables[temperature_k]
 
-    def _surfaces(self, runs, set_index: int, duration_s, cell_a, time_s: np.ndarray,
+    def _surfaces(self, runs: CellRuns, set_index: int, duration_s: np.ndarray, cell_a: np.ndarray, time_s: np.ndarray,
                   owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Surface stoichiometries (n, 2) and cell temperatures (K) of one set at ``time_s``, each inside (or at
         the end of) its own segment."""
@@ -387,7 +396,8 @@ class EnginePack:
                 temperature_k[inside] = temperatures_at_times(runs, self.modal, time_s[inside])[set_index]
         return surfaces, temperature_k
 
-    def _state_at(self, runs, duration_s, cell_a, first: int, end_s: float, soc_start: float,
+    def _state_at(self, runs: CellRuns, duration_s: np.ndarray, cell_a: np.ndarray, first: int, end_s: float,
+                  soc_start: float,
                   charge0: float) -> EngineState:
         """Particle states of every group at ``end_s`` (the first group's end: its own final state)."""
         particles, temperatures = [], []

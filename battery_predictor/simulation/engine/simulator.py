@@ -27,11 +27,13 @@ import logging
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
-from battery_predictor.simulation.base import PackSimResult, SimulationRequest
+from battery_predictor.simulation.base import PackSimResult, PackSimulator, SimulationRequest
 from battery_predictor.simulation.cell_setup import prepared_parameter_values
 from battery_predictor.simulation.engine.modal import ModalSystem, modal_system
 from battery_predictor.simulation.engine.model import (
@@ -64,6 +66,11 @@ from battery_predictor.simulation.engine.thermal import (
 )
 from battery_predictor.simulation.extensions import series_resistance_factor
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
+
+if TYPE_CHECKING:
+    import pybamm
+
+    from battery_predictor.params import PackParams
 
 LOG = logging.getLogger(__name__)
 
@@ -129,7 +136,7 @@ CELL_MODEL_EXTENSIONS = ("capacity_fade", "current_offset", "hysteresis", "resis
 ENGINE_EXTENSIONS = CELL_MODEL_EXTENSIONS + ("temperature",)
 
 
-def _series_resistance_ohm(params, temperature_k) -> np.ndarray:
+def _series_resistance_ohm(params: PackParams, temperature_k: npt.ArrayLike) -> np.ndarray:
     """The pack's ``R_eq`` (Ohm) at cell temperatures ``temperature_k`` (K): the extension ``temperature``'s
     Arrhenius factor (:func:`~battery_predictor.simulation.extensions.series_resistance_factor`), else constant."""
     p = params.interconnect
@@ -155,13 +162,16 @@ class EngineSimulator:
 
     name = "engine"
 
-    def __init__(self, backend: str = "auto", fallback="fast", cache_size: int = 8) -> None:
+    def __init__(self, backend: str = "auto", fallback: PackSimulator | Literal["fast"] | None = "fast",
+                 cache_size: int = 8) -> None:
+        self.fallback: PackSimulator | None
         if fallback == "fast":
             from battery_predictor.simulation.fast import FastPackSimulator
 
-            fallback = FastPackSimulator()
+            self.fallback = FastPackSimulator()
+        else:
+            self.fallback = fallback
         self.backend = backend
-        self.fallback = fallback
         self.cache_size = cache_size
         self._cache: OrderedDict[tuple, tuple[LinearSpm, ModalSystem]] = OrderedDict()
         self._values: dict[tuple, object] = {}
@@ -171,7 +181,7 @@ class EngineSimulator:
         self.extractions = 0
 
     # ----------------------------------------------------------------- public
-    def simulate(self, params, request: SimulationRequest) -> PackSimResult:
+    def simulate(self, params: PackParams, request: SimulationRequest) -> PackSimResult:
         """Simulate ``request`` on the pack ``params``; see :class:`PackSimulator`."""
         tic = time.perf_counter()
         reason = self.unsupported_reason(params, request)
@@ -184,7 +194,7 @@ class EngineSimulator:
             return self._fall_back(params, request, reason)
         return self._simulate(params, request, model, modal, sets, tic)
 
-    def simulate_batch(self, params, request: SimulationRequest, values: dict[str, np.ndarray]) -> PackBatchResult:
+    def simulate_batch(self, params: PackParams, request: SimulationRequest, values: dict[str, np.ndarray]) -> PackBatchResult:
         """Run many variants of ``params`` on ``request`` at once (no fallback: raises when not covered).
 
         Parameters
@@ -226,7 +236,7 @@ class EngineSimulator:
                                end_time_s=runs.end_time_s, reached_cutoff=runs.reached_cutoff, engine_seconds=engine_s,
                                runs=runs)
 
-    def _batch_concentrations(self, params, request: SimulationRequest, model: LinearSpm, values: dict,
+    def _batch_concentrations(self, params: PackParams, request: SimulationRequest, model: LinearSpm, values: dict,
                               n_sets: int) -> tuple[np.ndarray, np.ndarray]:
         if C_N0 in values or C_P0 in values:
             pv = self._parameter_values(params)
@@ -248,7 +258,7 @@ class EngineSimulator:
         return out[0], out[1]
 
     @staticmethod
-    def unsupported_reason(params, request: SimulationRequest) -> str | None:
+    def unsupported_reason(params: PackParams, request: SimulationRequest) -> str | None:
         """Why the engine cannot simulate ``request`` on ``params`` (None when it can)."""
         if request.cell_inputs:
             return "per-cell values need liionpack"
@@ -260,7 +270,7 @@ class EngineSimulator:
         return None
 
     # ---------------------------------------------------------------- helpers
-    def _fall_back(self, params, request: SimulationRequest, reason: str) -> PackSimResult:
+    def _fall_back(self, params: PackParams, request: SimulationRequest, reason: str) -> PackSimResult:
         if self.fallback is None:
             raise SimulationError(f"engine: {reason}")
         LOG.warning("engine: %s; simulating with the %s simulator", reason, self.fallback.name)
@@ -268,14 +278,14 @@ class EngineSimulator:
         result.extra["engine_fallback"] = f"{self.fallback.name}: {reason}"
         return result
 
-    def _scalable_keys(self, params) -> dict[str, str]:
+    def _scalable_keys(self, params: PackParams) -> dict[str, str]:
         """:data:`SCALABLE_KEYS`, plus the maximum concentrations where this model structure obeys their rule."""
         structure = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions)
         if structure not in self._c_max_rule:
             self._c_max_rule[structure] = c_max_scaling_holds(params)
         return {**SCALABLE_KEYS, **C_MAX_KEYS} if self._c_max_rule[structure] else SCALABLE_KEYS
 
-    def _diffusivity_table(self, params, model: LinearSpm, temperature_k: float) -> DiffusivityTemperature | None:
+    def _diffusivity_table(self, params: PackParams, model: LinearSpm, temperature_k: float) -> DiffusivityTemperature | None:
         """Thermal cells: the params' diffusivities over the temperature relative to ``temperature_k`` (cached)."""
         if model.thermal is None:
             return None
@@ -289,10 +299,10 @@ class EngineSimulator:
         return self._tables[key]
 
     @staticmethod
-    def _temperature_k(params, request: SimulationRequest) -> float:
+    def _temperature_k(params: PackParams, request: SimulationRequest) -> float:
         return float(request.ambient_temperature_k or params.ambient_temperature_k)
 
-    def _model(self, params, temperature_k: float) -> tuple[LinearSpm, ModalSystem, ParameterSets]:
+    def _model(self, params: PackParams, temperature_k: float) -> tuple[LinearSpm, ModalSystem, ParameterSets]:
         """The extraction for ``params`` (cached on everything but scalable values) and its scale factors.
 
         Diffusivities that are functions of the temperature are taken at ``temperature_k`` (the
@@ -326,7 +336,8 @@ class EngineSimulator:
             factors["heat_rate"] = self._heat_rate(model, pv, temperature_k, factors)
         return model, modal, ParameterSets(**factors)
 
-    def _heat_rate(self, model: LinearSpm, pv, temperature_k: float, factors: dict):
+    def _heat_rate(self, model: LinearSpm, pv: pybamm.ParameterValues, temperature_k: float,
+                   factors: dict) -> np.ndarray:
         """Thermal cells: the built cell's heat capacity over that of the sets' electrode thicknesses."""
         key = (model, float(temperature_k))
         if key not in self._heat_capacities:
@@ -338,7 +349,7 @@ class EngineSimulator:
         return capacity.j_m3_k(l_n, l_p) / capacity.j_m3_k(l_n * np.asarray(factors.get("thickness_n", 1.0)),
                                                            l_p * np.asarray(factors.get("thickness_p", 1.0)))
 
-    def _batch_factors(self, params, model: LinearSpm, base: ParameterSets, values: dict,
+    def _batch_factors(self, params: PackParams, model: LinearSpm, base: ParameterSets, values: dict,
                        temperature_k: float) -> dict:
         scalable = self._scalable_keys(params)
         unknown = set(values) - set(scalable) - _STATE_KEYS
@@ -353,7 +364,7 @@ class EngineSimulator:
                                                    temperature_k, factors)
         return factors
 
-    def _initial_concentrations(self, params, request: SimulationRequest, model: LinearSpm) -> tuple[float, float]:
+    def _initial_concentrations(self, params: PackParams, request: SimulationRequest, model: LinearSpm) -> tuple[float, float]:
         """(c_n, c_p) in mol/m3 for the request's SOC or pack open-circuit voltage, else the params' own."""
         pv = self._parameter_values(params)
         if request.initial_soc is None and request.initial_pack_ocv_v is None:
@@ -364,7 +375,7 @@ class EngineSimulator:
         assert request.initial_pack_ocv_v is not None  # neither given was answered above
         return window.concentrations(ocv_v=float(request.initial_pack_ocv_v) / params.series)
 
-    def _parameter_values(self, params):
+    def _parameter_values(self, params: PackParams) -> pybamm.ParameterValues:
         """The params' PyBaMM parameter values (cached on the cell values; do not modify the result)."""
         key = (params.base_parameter_set, repr(sorted(params.cell_values.items())))
         if key not in self._values:
@@ -373,7 +384,7 @@ class EngineSimulator:
             self._values[key] = prepared_parameter_values(params)
         return self._values[key]
 
-    def _simulate(self, params, request: SimulationRequest, model: LinearSpm, modal: ModalSystem,
+    def _simulate(self, params: PackParams, request: SimulationRequest, model: LinearSpm, modal: ModalSystem,
                   sets: ParameterSets, tic: float) -> PackSimResult:
         temperature_k = float(request.ambient_temperature_k or params.ambient_temperature_k)
         c_n0, c_p0 = self._initial_concentrations(params, request, model)
@@ -422,9 +433,9 @@ class EngineSimulator:
 class _Overlay:
     """Parameter values with some keys replaced (read-only)."""
 
-    def __init__(self, base, overrides: dict[str, float]) -> None:
+    def __init__(self, base: pybamm.ParameterValues, overrides: dict[str, float]) -> None:
         self._base = base
         self._overrides = overrides
 
-    def __getitem__(self, key: str):
+    def __getitem__(self, key: str) -> Any:
         return self._overrides[key] if key in self._overrides else self._base[key]

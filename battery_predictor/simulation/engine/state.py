@@ -15,10 +15,16 @@ is the open-circuit voltage ``U_p(y) - U_n(x)`` of PyBaMM's expression:
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.engine.model import LinearSpm
+
+if TYPE_CHECKING:
+    import pybamm
 
 _GRID_POINTS = 513
 _ZOOMS = 3
@@ -38,7 +44,7 @@ class StoichiometryWindow:
         concentrations, OCV limits, reference temperature).
     """
 
-    def __init__(self, model: LinearSpm, pv) -> None:
+    def __init__(self, model: LinearSpm, pv: pybamm.ParameterValues) -> None:
         def get(key: str) -> float:
             return float(pv[key])
 
@@ -60,11 +66,11 @@ class StoichiometryWindow:
         self.x_100 = self.x_at_ocv(get("Open-circuit voltage at 100% SOC [V]"))
         self.x_0 = self.x_at_ocv(get("Open-circuit voltage at 0% SOC [V]"))
 
-    def y_of(self, x):
+    def y_of(self, x: npt.ArrayLike) -> np.ndarray:
         """Positive stoichiometry that keeps the lithium inventory at negative stoichiometry ``x``."""
         return (self.n_li - self.n_n * np.asarray(x, dtype=float)) / self.n_p
 
-    def ocv_v(self, x) -> np.ndarray:
+    def ocv_v(self, x: npt.ArrayLike) -> np.ndarray:
         """Open-circuit voltage (V) at negative stoichiometry ``x`` (PyBaMM's voltage at zero current)."""
         x = np.asarray(x, dtype=float)  # the engine's surface values are stoichiometries
         return self.model.cell_voltage_v(x, self.y_of(x), 0.0, self.reference_temperature_k)

@@ -38,13 +38,22 @@ afterwards on every boundary; about 200x slower, the path for machines without N
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
-from battery_predictor.simulation.engine.kernel import forget_thermal_kernel, thermal_kernel
+from battery_predictor.simulation.engine.kernel import Kernel, forget_thermal_kernel, thermal_kernel
 from battery_predictor.simulation.engine.modal import step_coefficients
+
+if TYPE_CHECKING:
+    import pybamm
+
+    from battery_predictor.simulation.engine.modal import ModalSystem
+    from battery_predictor.simulation.engine.model import LinearSpm
 
 LOG = logging.getLogger(__name__)
 #: Longest step (s) the temperature is advanced in one go; longer steps are split.
@@ -76,7 +85,7 @@ class DiffusivityTemperature:
     ln_factor: np.ndarray
     constant: bool
 
-    def factors(self, temperature_k) -> np.ndarray:
+    def factors(self, temperature_k: npt.ArrayLike) -> np.ndarray:
         """``g_e(T)`` per electrode, shape (..., 2)."""
         t = np.asarray(temperature_k, dtype=float)
         if self.constant:
@@ -88,7 +97,7 @@ class DiffusivityTemperature:
         return np.exp(np.moveaxis(ln_g, 0, -1))
 
 
-def diffusivity_temperature(pv, keys: tuple[str, str], reference_temperature_k: float) -> DiffusivityTemperature:
+def diffusivity_temperature(pv: pybamm.ParameterValues, keys: tuple[str, str], reference_temperature_k: float) -> DiffusivityTemperature:
     """The table of ``pv``'s diffusivities (``keys``: negative, positive) relative to ``reference_temperature_k``.
 
     Functions are evaluated by PyBaMM at stoichiometry 0.5 and must not depend on it at any of the
@@ -147,21 +156,21 @@ class HeatCapacity:
     negative_j_m3_k: float
     positive_j_m3_k: float
 
-    def j_m3_k(self, thickness_n_m, thickness_p_m) -> np.ndarray:
+    def j_m3_k(self, thickness_n_m: npt.ArrayLike, thickness_p_m: npt.ArrayLike) -> np.ndarray:
         """Volume-averaged heat capacity (J/(m3 K)) at electrode thicknesses (m)."""
         l_n, l_p = np.asarray(thickness_n_m, dtype=float), np.asarray(thickness_p_m, dtype=float)
         return (self.other_j_m2_k + self.negative_j_m3_k * l_n + self.positive_j_m3_k * l_p) / (
             self.other_m + l_n + l_p)
 
 
-def heat_capacity(pv, temperature_k: float) -> HeatCapacity:
+def heat_capacity(pv: pybamm.ParameterValues, temperature_k: float) -> HeatCapacity:
     """:class:`HeatCapacity` of parameter values ``pv`` at ``temperature_k`` (K), evaluated by PyBaMM."""
     import pybamm
 
     thermal, geometry = pybamm.ThermalParameters(), pybamm.GeometricParameters()
     t = pybamm.Scalar(float(temperature_k))
 
-    def value(symbol) -> float:
+    def value(symbol: pybamm.Symbol) -> float:
         return float(np.asarray(pv.evaluate(symbol)).ravel()[0])
 
     try:
@@ -216,7 +225,7 @@ class ThermalTrace:
     voltages_v: tuple[np.ndarray, np.ndarray] | None = None
 
     def states_at(self, lam: np.ndarray, drive: np.ndarray, duration_s: np.ndarray, current_a: np.ndarray,
-                  electrode_factors, step: np.ndarray) -> np.ndarray:
+                  electrode_factors: Callable[[np.ndarray, np.ndarray], np.ndarray], step: np.ndarray) -> np.ndarray:
         """Modal states (n_sets, n_modes) at the start of ``step`` (one index per set), replayed from the kept ones."""
         sets = np.arange(self.states.shape[0])
         z = self.states[sets, step // self.stride].copy()
@@ -231,7 +240,7 @@ class ThermalTrace:
         return z
 
 
-def thermal_recurrence(model, modal, lam: np.ndarray, drive: np.ndarray, z0: np.ndarray, temperature0_k: np.ndarray,
+def thermal_recurrence(model: LinearSpm, modal: ModalSystem, lam: np.ndarray, drive: np.ndarray, z0: np.ndarray, temperature0_k: np.ndarray,
                        ambient_k: np.ndarray, eps_n: np.ndarray, eps_p: np.ndarray, height_m: np.ndarray,
                        duration_s: np.ndarray, current_a: np.ndarray, table: DiffusivityTemperature, *,
                        heat_rate: np.ndarray | None = None, stride: int = 64, backend: str = "auto") -> ThermalTrace:
@@ -285,13 +294,18 @@ def thermal_recurrence(model, modal, lam: np.ndarray, drive: np.ndarray, z0: np.
                              duration_s, current_a, table, stride, heat_rate)
 
 
-def _recurrence_numpy(model, modal, lam, drive, z0, temperature0_k, ambient_k, eps_n, eps_p, height_m, duration_s,
-                      current_a, table: DiffusivityTemperature, stride: int, heat_rate: np.ndarray) -> ThermalTrace:
+def _recurrence_numpy(model: LinearSpm, modal: ModalSystem, lam: np.ndarray, drive: np.ndarray, z0: np.ndarray,
+                      temperature0_k: np.ndarray, ambient_k: np.ndarray, eps_n: np.ndarray, eps_p: np.ndarray,
+                      height_m: np.ndarray, duration_s: np.ndarray, current_a: np.ndarray,
+                      table: DiffusivityTemperature, stride: int, heat_rate: np.ndarray) -> ThermalTrace:
     n_sets, n_modes = z0.shape
     n_steps = duration_s.size
     weights = modal.surface_weights
-    def rate(*args):
-        return heat_rate * model.thermal.temperature_rate_k_s(*args)
+    thermal = model.thermal
+    assert thermal is not None  # a thermal run
+
+    def rate(*args: npt.ArrayLike) -> np.ndarray:
+        return heat_rate * thermal.temperature_rate_k_s(*args)
 
     surfaces = np.empty((n_sets, n_steps + 1, 2))
     temps = np.empty((n_sets, n_steps + 1))
@@ -328,8 +342,10 @@ def _recurrence_numpy(model, modal, lam, drive, z0, temperature0_k, ambient_k, e
                         stride=stride, z_end=z, backend="numpy")
 
 
-def _recurrence_numba(kernel, modal, lam, drive, z0, temperature0_k, ambient_k, eps_n, eps_p, height_m, duration_s,
-                      current_a, table: DiffusivityTemperature, stride: int, heat_rate: np.ndarray,
+def _recurrence_numba(kernel: tuple[Kernel, bool], modal: ModalSystem, lam: np.ndarray, drive: np.ndarray,
+                      z0: np.ndarray, temperature0_k: np.ndarray, ambient_k: np.ndarray, eps_n: np.ndarray,
+                      eps_p: np.ndarray, height_m: np.ndarray, duration_s: np.ndarray, current_a: np.ndarray,
+                      table: DiffusivityTemperature, stride: int, heat_rate: np.ndarray,
                       cutoff_v: float) -> ThermalTrace:
     n_sets, n_modes = z0.shape
     n_steps = duration_s.size
@@ -338,11 +354,11 @@ def _recurrence_numba(kernel, modal, lam, drive, z0, temperature0_k, ambient_k, 
     factors = np.empty((n_sets, n_steps, 2))
     states = np.empty((n_sets, n_steps // stride + 1, n_modes))
     z_end = np.empty((n_sets, n_modes))
-    kernel, has_voltage = kernel
+    compiled, has_voltage = kernel
     start_v = np.empty((n_sets, n_steps)) if has_voltage else np.empty((1, 1))
     end_v = np.empty((n_sets, n_steps)) if has_voltage else np.empty((1, 1))
     c = np.ascontiguousarray
-    kernel(c(lam), c(drive), c(z0), c(np.asarray(temperature0_k, dtype=float)), c(np.asarray(ambient_k, dtype=float)),
+    compiled(c(lam), c(drive), c(z0), c(np.asarray(temperature0_k, dtype=float)), c(np.asarray(ambient_k, dtype=float)),
            c(eps_n), c(eps_p), c(height_m), c(heat_rate), c(duration_s), c(current_a), c(modal.surface_weights),
            int(modal.n_negative), table.inverse_start_per_k, table.inverse_step_per_k, c(table.ln_factor), bool(table.constant),
            int(stride), surfaces, temps, factors, states, z_end, start_v, end_v, float(cutoff_v))
