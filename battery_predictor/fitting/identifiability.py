@@ -120,8 +120,8 @@ def analyse(names: Sequence[str], values: Sequence[float], log_scale: Sequence[b
     for i in range(n):
         weak = bool(np.any(undetermined_dir & (np.abs(eigvec[i, :]) > 0.3)))
         half = _Z95 * sd[i]
-        if log_scale[i]:
-            lo, hi = values[i] * math.exp(-half), values[i] * math.exp(half)
+        if log_scale[i]:  # a half-width beyond e^700 is no bound at all (and overflows exp)
+            lo, hi = (values[i] * math.exp(-half), values[i] * math.exp(half)) if half < 700.0 else (0.0, math.inf)
             pinned = half < DETERMINED_HALF_WIDTH
         else:
             lo, hi = values[i] - half, values[i] + half

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import warnings
 from pathlib import Path
 
@@ -286,3 +287,15 @@ def test_a_rest_voltage_just_above_full_starts_full_with_a_warning_and_far_above
     assert got == pytest.approx(full, rel=1e-4)
     with pytest.raises(SimulationError, match="outside the voltage limits"):
         initial_concentrations(ranger, pv, initial_soc=None, initial_cell_ocv_v=v_full + 2 * OCV_CLAMP_TOLERANCE_V)
+
+
+def test_identifiability_of_a_parameter_the_data_do_not_touch_is_unbounded_not_an_overflow():
+    rng = np.random.default_rng(2)
+    m = 50
+    # the second coordinate (log scale) moves the residuals by 3e-6 of the first under 1 V of noise:
+    # its 95 % half-width is ~1e5 in log units
+    a = rng.normal(size=m)
+    jac = np.column_stack([a, 3e-6 * rng.normal(size=m)])
+    rep = analyse(["r", "d"], [1.0, 1e-3], [False, True], rng.normal(size=m), jac, [(0.0, 2.0), (1e-5, 1e-1)])
+    assert rep.determined[1] is False
+    assert math.isinf(rep.ci95_high[1]) and rep.ci95_low[1] <= 1e-3
