@@ -15,6 +15,9 @@ from __future__ import annotations
 import math
 import re
 import weakref
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +33,7 @@ _ROW = re.compile(r"y\[(\d+):(\d+)\]")
 _NP_CALL = re.compile(r"np\.\w+")
 _NAME = re.compile(r"\b(?:var_m?\d+|y\d+)\b")
 #: Compiled kernels by (printed voltage source, parallel).
-_CACHE: dict[tuple, object] = {}
+_CACHE: dict[tuple, Any] = {}
 #: Printed voltage source by model (printing takes milliseconds).
 _SOURCES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 #: Printed heat-equation source by model (thermal cells).
@@ -122,8 +125,67 @@ def fused_kernel(model: LinearSpm, *, parallel: bool = False):
     """The compiled run kernel for ``model``'s voltage, or None (no Numba, or no scalar form).
 
     ``parallel`` selects the variant that spreads the sets over the cores (its compilation
-    takes several seconds, so single runs use the serial one).
+    takes several seconds, so single runs use the serial one). The kernel releases the GIL.
     """
+    scalar = _scalar_kernels(model)
+    if scalar is None:
+        return None
+    key = (scalar.source, bool(parallel))
+    if key not in _CACHE:
+        import numba
+
+        _CACHE[key] = _compile(numba, scalar, bool(parallel))
+    return _CACHE[key]
+
+
+@dataclass(frozen=True)
+class VoltageKernels:
+    """A model's printed voltage compiled for the two-pass path (every function releases the GIL).
+
+    Attributes
+    ----------
+    source : str
+        The printed voltage source they were compiled from.
+    voltage, voltage_pair : callable
+        ``cell_voltage(y0, ..., y6)`` and ``cell_voltage_pair`` (:func:`scalar_voltage_source`), scalar.
+    cutoff_root : callable
+        ``cutoff_root(z, lam, drive, weights, h_s, current_a, v0, v1, temperature_k, eps_n, eps_p,
+        height_m, cutoff_v, tol_s)``: :attr:`cutoff_roots` for one set (scalars and (n_modes,) rows).
+    grid : callable
+        ``grid(s_n, s_p, current_a, temperature_k, eps_n, eps_p, height_m, out)``: the cell voltage (V)
+        into ``out`` (n_sets, n) at surface stoichiometries (n_sets, n), cell currents (A; (n_sets, n)
+        or (1, n)) and per-set temperature (K), volume fractions and electrode height (m) ((n_sets,)).
+    cutoff_roots : callable
+        ``cutoff_roots(z, lam, drive, weights, h_s, current_a, v0, v1, temperature_k, eps_n, eps_p,
+        height_m, cutoff_v, tol_s)``: time into the step (s, (n,)) at which the voltage meets
+        ``cutoff_v`` for modal states ``z`` (n, n_modes) at step starts, steps of ``h_s`` s under
+        ``current_a`` A with voltages ``v0`` above and ``v1`` below the cut-off at their ends: the
+        fused kernel's Illinois regula falsi on the exact within-step solution, to ``tol_s``.
+    within : callable
+        ``within(z, lam, drive, weights, tau_s, current_a) -> (s_n, s_p)``: surface stoichiometries
+        ``tau_s`` s into a step from modal state ``z`` (one set).
+    surfaces_within : callable
+        ``surfaces_within(checkpoints, lam, drive, weights, step, tau_s, current_a, out)``: surface
+        stoichiometries (n, 2) into ``out``, ``tau_s[k]`` s into step ``step[k]`` from the state at that
+        step's start (``checkpoints`` (n_steps + 1, n_modes), one set) under ``current_a[k]`` A.
+    """
+
+    source: str
+    voltage: Callable[..., Any]
+    voltage_pair: Callable[..., Any]
+    cutoff_root: Callable[..., Any]
+    grid: Callable[..., Any]
+    cutoff_roots: Callable[..., Any]
+    within: Callable[..., Any]
+    surfaces_within: Callable[..., Any]
+
+
+def voltage_kernels(model: LinearSpm) -> VoltageKernels | None:
+    """The compiled voltage pieces of ``model`` (:class:`VoltageKernels`), or None (no Numba, no scalar form)."""
+    return _scalar_kernels(model)
+
+
+def _scalar_kernels(model: LinearSpm) -> VoltageKernels | None:
     try:
         import numba
     except ImportError:
@@ -133,9 +195,9 @@ def fused_kernel(model: LinearSpm, *, parallel: bool = False):
     source = _SOURCES[model]
     if not source:
         return None
-    key = (source, bool(parallel))
+    key = ("scalar", source)
     if key not in _CACHE:
-        _CACHE[key] = _compile(numba, source, bool(parallel))
+        _CACHE[key] = _compile_scalar(numba, source)
     return _CACHE[key]
 
 
@@ -173,13 +235,15 @@ def forget_kernel(model: LinearSpm) -> None:
     _SOURCES[model] = ""
 
 
-def _compile(numba, source: str, parallel: bool):
+def _compile_scalar(numba, source: str) -> VoltageKernels:
+    """Compile the printed voltage and the two-pass pieces built on it (lazily, at their first call)."""
     namespace: dict = {"math": math}
     exec(compile(source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - code printed by PyBaMM from the model
-    voltage = numba.njit(fastmath=False)(namespace["cell_voltage"])
-    voltage_pair = numba.njit(fastmath=False)(namespace["cell_voltage_pair"])
+    jit = numba.njit(fastmath=False, nogil=True, error_model="numpy")
+    voltage = jit(namespace["cell_voltage"])
+    voltage_pair = jit(namespace["cell_voltage_pair"])
 
-    @numba.njit(fastmath=False)
+    @jit
     def within(z, lam, drive, weights, tau, current):  # pragma: no cover - compiled
         sn = 0.0
         sp = 0.0
@@ -193,7 +257,64 @@ def _compile(numba, source: str, parallel: bool):
             sp += weights[1, j] * zj
         return sn, sp
 
-    @numba.njit(parallel=parallel, fastmath=False)
+    @jit
+    def cutoff_root(z, lam, drive, weights, h, i, v0, v1, temp, en, ep, hh, cutoff_v,
+                    tol_s):  # pragma: no cover - compiled
+        # Illinois regula falsi on the exact within-step solution
+        lo, hi, f_lo, f_hi, side = 0.0, h, v0 - cutoff_v, v1 - cutoff_v, 0
+        for _ in range(100):
+            if hi - lo <= tol_s:
+                break
+            mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            if not (lo < mid < hi):
+                mid = 0.5 * (lo + hi)
+            a, b = within(z, lam, drive, weights, mid, i)
+            f_mid = voltage(a, b, i, temp, en, ep, hh) - cutoff_v
+            if f_mid == 0.0:
+                lo = mid
+                hi = mid
+                break
+            if f_mid < 0.0:
+                hi, f_hi = mid, f_mid
+                if side == -1:
+                    f_lo *= 0.5
+                side = -1
+            else:
+                lo, f_lo = mid, f_mid
+                if side == 1:
+                    f_hi *= 0.5
+                side = 1
+        return 0.5 * (lo + hi)
+
+    @jit
+    def cutoff_roots(z, lam, drive, weights, h, i, v0, v1, temp, en, ep, hh, cutoff_v,
+                     tol_s):  # pragma: no cover - compiled
+        out = np.empty(z.shape[0])
+        for s in range(z.shape[0]):
+            out[s] = cutoff_root(z[s], lam[s], drive[s], weights, h[s], i[s], v0[s], v1[s], temp[s], en[s], ep[s],
+                                 hh[s], cutoff_v, tol_s)
+        return out
+
+    @jit
+    def grid(s_n, s_p, current, temp, en, ep, hh, out):  # pragma: no cover - compiled
+        rows = current.shape[0]
+        for s in range(s_n.shape[0]):
+            r = s if rows > 1 else 0
+            for k in range(s_n.shape[1]):
+                out[s, k] = voltage(s_n[s, k], s_p[s, k], current[r, k], temp[s], en[s], ep[s], hh[s])
+
+    @jit
+    def surfaces_within(checkpoints, lam, drive, weights, step, tau, current, out):  # pragma: no cover - compiled
+        for k in range(step.shape[0]):
+            out[k, 0], out[k, 1] = within(checkpoints[step[k]], lam, drive, weights, tau[k], current[k])
+
+    return VoltageKernels(source, voltage, voltage_pair, cutoff_root, grid, cutoff_roots, within, surfaces_within)
+
+
+def _compile(numba, scalar: VoltageKernels, parallel: bool):
+    voltage, voltage_pair, cutoff_root = scalar.voltage, scalar.voltage_pair, scalar.cutoff_root
+
+    @numba.njit(parallel=parallel, fastmath=False, nogil=True)
     def kernel(lam, drive, z0, duration_s, current_a, weights, temperature_k, eps_n, eps_p, height_m, cutoff_v,
                tol_s, start_v, end_v, end_time, cutoff_step, at_start, z_end):  # pragma: no cover - compiled
         n_sets, n_modes = z0.shape
@@ -243,33 +364,9 @@ def _compile(numba, source: str, parallel: bool):
                     v1, v_next = voltage_pair(sn, sp, i, current_a[k + 1], temp, en, ep, hh)
                 else:
                     v1 = voltage(sn, sp, i, temp, en, ep, hh)
-                if not v1 >= cutoff_v:
-                    # root inside the step: Illinois regula falsi on the exact within-step solution
-                    lo, hi, f_lo, f_hi, side = 0.0, h, v0 - cutoff_v, v1 - cutoff_v, 0
-                    for _ in range(100):
-                        if hi - lo <= tol_s:
-                            break
-                        mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-                        if not (lo < mid < hi):
-                            mid = 0.5 * (lo + hi)
-                        a, b = within(z, lam[s], drive[s], weights, mid, i)
-                        f_mid = voltage(a, b, i, temp, en, ep, hh) - cutoff_v
-                        if f_mid == 0.0:
-                            lo = mid
-                            hi = mid
-                            break
-                        if f_mid < 0.0:
-                            hi, f_hi = mid, f_mid
-                            if side == -1:
-                                f_lo *= 0.5
-                            side = -1
-                        else:
-                            lo, f_lo = mid, f_mid
-                            if side == 1:
-                                f_hi *= 0.5
-                            side = 1
+                if not v1 >= cutoff_v:  # root inside the step
+                    tau = cutoff_root(z, lam[s], drive[s], weights, h, i, v0, v1, temp, en, ep, hh, cutoff_v, tol_s)
                     cutoff_step[s] = k
-                    tau = 0.5 * (lo + hi)
                     end_time[s] = t + tau
                     for j in range(n_modes):
                         x = lam[s, j] * tau
@@ -298,22 +395,22 @@ def compile_thermal_kernel(numba, rate_source: str, voltage_source: str, paralle
     """
     namespace: dict = {"math": math}
     exec(compile(rate_source, "<pybamm heat equation>", "exec"), namespace)  # noqa: S102 - printed by PyBaMM
-    rate = numba.njit(fastmath=False)(namespace["cell_rate"])
+    rate = numba.njit(fastmath=False, nogil=True)(namespace["cell_rate"])
     has_voltage = bool(voltage_source)
     if has_voltage:
         exec(compile(voltage_source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - printed by PyBaMM
-        voltage = numba.njit(fastmath=False)(namespace["cell_voltage"])
-        voltage_pair = numba.njit(fastmath=False)(namespace["cell_voltage_pair"])
+        voltage = numba.njit(fastmath=False, nogil=True)(namespace["cell_voltage"])
+        voltage_pair = numba.njit(fastmath=False, nogil=True)(namespace["cell_voltage_pair"])
     else:
-        @numba.njit(fastmath=False)
+        @numba.njit(fastmath=False, nogil=True)
         def voltage(y0, y1, y2, y3, y4, y5, y6):  # pragma: no cover - compiled, never called
             return math.nan
 
-        @numba.njit(fastmath=False)
+        @numba.njit(fastmath=False, nogil=True)
         def voltage_pair(y0, y1, y2a, y2b, y3, y4, y5, y6):  # pragma: no cover - compiled, never called
             return math.nan, math.nan
 
-    @numba.njit(parallel=parallel, fastmath=False)
+    @numba.njit(parallel=parallel, fastmath=False, nogil=True)
     def kernel(lam, drive, z0, temperature0_k, ambient_k, eps_n, eps_p, height_m, heat_rate, duration_s, current_a,
                weights,
                n_neg, inv0, dinv, ln_factor, constant, stride, surfaces, temps, factors, states,

@@ -182,7 +182,7 @@ def _compile(numba):
     if "kernel" in _KERNEL_CACHE:
         return _KERNEL_CACHE["kernel"]
 
-    @numba.njit(cache=True, fastmath=False)
+    @numba.njit(cache=True, fastmath=False, nogil=True)
     def kernel(lam, drive, z0, duration_s, current_a, weights, stride, surfaces, checkpoints,
                z_end):  # pragma: no cover - compiled
         n_sets, n_modes = z0.shape
