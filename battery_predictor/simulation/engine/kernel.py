@@ -8,6 +8,12 @@ Expressions using anything else (interpolated data, constants arrays) have no co
 :func:`fused_kernel` then returns None and the caller uses the NumPy path. A lumped thermal cell's
 heat equation is printed the same way for the thermal recurrence (:func:`thermal_kernel`,
 :mod:`~battery_predictor.simulation.engine.thermal`).
+
+The fused kernel and the two-pass pieces (:class:`VoltageKernels`) are written with the printed
+voltage to a module file per voltage and compiled with Numba's disk cache
+(:mod:`~battery_predictor.simulation.engine.kernel_module`): a new process loads them in about a
+second instead of compiling them (several seconds). The thermal kernel is compiled in memory
+(no disk cache). Every compiled function releases the GIL.
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ _SCALAR_FUNCTIONS = {
 }
 _ROW = re.compile(r"y\[(\d+):(\d+)\]")
 _NP_CALL = re.compile(r"np\.\w+")
-_NAME = re.compile(r"\b(?:var_m?\d+|y\d+)\b")
+_NAME = re.compile(r"\b(?:var_m?\d+|tmp\d+|y\d+)\b")
 #: Compiled kernels by (printed voltage source, parallel).
 _CACHE: dict[tuple, Any] = {}
 #: Printed voltage source by model (printing takes milliseconds).
@@ -63,8 +69,22 @@ def _scalar_lines(symbol, n_rows: int) -> tuple[list[str], str] | None:
         body = re.sub(re.escape(call) + r"\b", scalar, body)
     if "[" in body or "@" in body:
         return None
-    lines = [line for line in body.splitlines() if line.strip()]
+    lines = _canonical_names([line for line in body.splitlines() if line.strip()])
     return lines, lines[-1].split("=", 1)[0].strip()
+
+
+def _canonical_names(lines: list[str]) -> list[str]:
+    """PyBaMM's temporaries (``var_<symbol id>``, ids that differ from process to process) renamed ``tmp0, tmp1, ...``
+    in order of appearance, so that one expression prints the same source in every process (the disk cache's key)."""
+    names: dict[str, str] = {}
+
+    def rename(match: re.Match) -> str:
+        name = match.group(0)
+        if name.startswith("y"):
+            return name
+        return names.setdefault(name, f"tmp{len(names)}")
+
+    return [_NAME.sub(rename, line) for line in lines]
 
 
 def scalar_voltage_source(model: LinearSpm) -> str | None:
@@ -130,12 +150,7 @@ def fused_kernel(model: LinearSpm, *, parallel: bool = False):
     scalar = _scalar_kernels(model)
     if scalar is None:
         return None
-    key = (scalar.source, bool(parallel))
-    if key not in _CACHE:
-        import numba
-
-        _CACHE[key] = _compile(numba, scalar, bool(parallel))
-    return _CACHE[key]
+    return scalar.run_parallel if parallel else scalar.run_serial
 
 
 @dataclass(frozen=True)
@@ -168,6 +183,8 @@ class VoltageKernels:
         ``surfaces_within(checkpoints, lam, drive, weights, step, tau_s, current_a, out)``: surface
         stoichiometries (n, 2) into ``out``, ``tau_s[k]`` s into step ``step[k]`` from the state at that
         step's start (``checkpoints`` (n_steps + 1, n_modes), one set) under ``current_a[k]`` A.
+    run_serial, run_parallel : callable
+        The fused run kernel (:func:`fused_kernel`), sets one after the other or spread over the cores.
     """
 
     source: str
@@ -178,6 +195,8 @@ class VoltageKernels:
     cutoff_roots: Callable[..., Any]
     within: Callable[..., Any]
     surfaces_within: Callable[..., Any]
+    run_serial: Callable[..., Any]
+    run_parallel: Callable[..., Any]
 
 
 def voltage_kernels(model: LinearSpm) -> VoltageKernels | None:
@@ -236,155 +255,14 @@ def forget_kernel(model: LinearSpm) -> None:
 
 
 def _compile_scalar(numba, source: str) -> VoltageKernels:
-    """Compile the printed voltage and the two-pass pieces built on it (lazily, at their first call)."""
-    namespace: dict = {"math": math}
-    exec(compile(source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - code printed by PyBaMM from the model
-    jit = numba.njit(fastmath=False, nogil=True, error_model="numpy")
-    voltage = jit(namespace["cell_voltage"])
-    voltage_pair = jit(namespace["cell_voltage_pair"])
+    """The printed voltage and the kernels built on it (:mod:`.kernel_module`; compiled, or loaded from Numba's
+    disk cache, at their first call)."""
+    from battery_predictor.simulation.engine.kernel_module import kernel_module
 
-    @jit
-    def within(z, lam, drive, weights, tau, current):  # pragma: no cover - compiled
-        sn = 0.0
-        sp = 0.0
-        for j in range(z.shape[0]):
-            x = lam[j] * tau
-            if lam[j] == 0.0:
-                zj = z[j] + tau * drive[j] * current
-            else:
-                zj = math.exp(x) * z[j] + math.expm1(x) / lam[j] * drive[j] * current
-            sn += weights[0, j] * zj
-            sp += weights[1, j] * zj
-        return sn, sp
-
-    @jit
-    def cutoff_root(z, lam, drive, weights, h, i, v0, v1, temp, en, ep, hh, cutoff_v,
-                    tol_s):  # pragma: no cover - compiled
-        # Illinois regula falsi on the exact within-step solution
-        lo, hi, f_lo, f_hi, side = 0.0, h, v0 - cutoff_v, v1 - cutoff_v, 0
-        for _ in range(100):
-            if hi - lo <= tol_s:
-                break
-            mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-            if not (lo < mid < hi):
-                mid = 0.5 * (lo + hi)
-            a, b = within(z, lam, drive, weights, mid, i)
-            f_mid = voltage(a, b, i, temp, en, ep, hh) - cutoff_v
-            if f_mid == 0.0:
-                lo = mid
-                hi = mid
-                break
-            if f_mid < 0.0:
-                hi, f_hi = mid, f_mid
-                if side == -1:
-                    f_lo *= 0.5
-                side = -1
-            else:
-                lo, f_lo = mid, f_mid
-                if side == 1:
-                    f_hi *= 0.5
-                side = 1
-        return 0.5 * (lo + hi)
-
-    @jit
-    def cutoff_roots(z, lam, drive, weights, h, i, v0, v1, temp, en, ep, hh, cutoff_v,
-                     tol_s):  # pragma: no cover - compiled
-        out = np.empty(z.shape[0])
-        for s in range(z.shape[0]):
-            out[s] = cutoff_root(z[s], lam[s], drive[s], weights, h[s], i[s], v0[s], v1[s], temp[s], en[s], ep[s],
-                                 hh[s], cutoff_v, tol_s)
-        return out
-
-    @jit
-    def grid(s_n, s_p, current, temp, en, ep, hh, out):  # pragma: no cover - compiled
-        rows = current.shape[0]
-        for s in range(s_n.shape[0]):
-            r = s if rows > 1 else 0
-            for k in range(s_n.shape[1]):
-                out[s, k] = voltage(s_n[s, k], s_p[s, k], current[r, k], temp[s], en[s], ep[s], hh[s])
-
-    @jit
-    def surfaces_within(checkpoints, lam, drive, weights, step, tau, current, out):  # pragma: no cover - compiled
-        for k in range(step.shape[0]):
-            out[k, 0], out[k, 1] = within(checkpoints[step[k]], lam, drive, weights, tau[k], current[k])
-
-    return VoltageKernels(source, voltage, voltage_pair, cutoff_root, grid, cutoff_roots, within, surfaces_within)
-
-
-def _compile(numba, scalar: VoltageKernels, parallel: bool):
-    voltage, voltage_pair, cutoff_root = scalar.voltage, scalar.voltage_pair, scalar.cutoff_root
-
-    @numba.njit(parallel=parallel, fastmath=False, nogil=True)
-    def kernel(lam, drive, z0, duration_s, current_a, weights, temperature_k, eps_n, eps_p, height_m, cutoff_v,
-               tol_s, start_v, end_v, end_time, cutoff_step, at_start, z_end):  # pragma: no cover - compiled
-        n_sets, n_modes = z0.shape
-        n_steps = duration_s.shape[0]
-        for s in numba.prange(n_sets):
-            z = z0[s].copy()
-            decay = np.empty(n_modes)
-            phid = np.empty(n_modes)
-            last_h = -1.0
-            t = 0.0
-            cutoff_step[s] = n_steps
-            at_start[s] = False
-            end_time[s] = 0.0
-            temp, en, ep, hh = temperature_k[s], eps_n[s], eps_p[s], height_m[s]
-            sn = 0.0
-            sp = 0.0
-            for j in range(n_modes):
-                sn += weights[0, j] * z[j]
-                sp += weights[1, j] * z[j]
-            v_next = voltage(sn, sp, current_a[0], temp, en, ep, hh)
-            for k in range(n_steps):
-                h = duration_s[k]
-                i = current_a[k]
-                v0 = v_next
-                start_v[s, k] = v0
-                if not v0 >= cutoff_v:
-                    cutoff_step[s] = k
-                    at_start[s] = True
-                    end_time[s] = t
-                    break
-                if h != last_h:
-                    for j in range(n_modes):
-                        x = lam[s, j] * h
-                        decay[j] = math.exp(x)
-                        if lam[s, j] == 0.0:
-                            phid[j] = h * drive[s, j]
-                        else:
-                            phid[j] = math.expm1(x) / lam[s, j] * drive[s, j]
-                    last_h = h
-                sn = 0.0
-                sp = 0.0
-                for j in range(n_modes):
-                    zj = decay[j] * z[j] + phid[j] * i
-                    sn += weights[0, j] * zj
-                    sp += weights[1, j] * zj
-                if k + 1 < n_steps:  # the step's end and the next step's start share the state
-                    v1, v_next = voltage_pair(sn, sp, i, current_a[k + 1], temp, en, ep, hh)
-                else:
-                    v1 = voltage(sn, sp, i, temp, en, ep, hh)
-                if not v1 >= cutoff_v:  # root inside the step
-                    tau = cutoff_root(z, lam[s], drive[s], weights, h, i, v0, v1, temp, en, ep, hh, cutoff_v, tol_s)
-                    cutoff_step[s] = k
-                    end_time[s] = t + tau
-                    for j in range(n_modes):
-                        x = lam[s, j] * tau
-                        if lam[s, j] == 0.0:
-                            z[j] = z[j] + tau * drive[s, j] * i
-                        else:
-                            z[j] = math.exp(x) * z[j] + math.expm1(x) / lam[s, j] * drive[s, j] * i
-                    break
-                end_v[s, k] = v1
-                for j in range(n_modes):
-                    z[j] = decay[j] * z[j] + phid[j] * i
-                t += h
-            if cutoff_step[s] == n_steps:
-                end_time[s] = t
-            for j in range(n_modes):
-                z_end[s, j] = z[j]
-
-    return kernel
+    module = kernel_module(numba, source)
+    return VoltageKernels(source, module.cell_voltage, module.cell_voltage_pair, module.cutoff_root, module.grid,
+                          module.cutoff_roots, module.within, module.surfaces_within, module.run_serial,
+                          module.run_parallel)
 
 
 def compile_thermal_kernel(numba, rate_source: str, voltage_source: str, parallel: bool):
