@@ -10,7 +10,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from battery_predictor.cli.common import check_output_file, check_plot_file, data_options, load_data, print_json
+from battery_predictor.cli.common import (
+    check_output_file,
+    check_plot_file,
+    data_options,
+    engine_fallback,
+    load_data,
+    print_json,
+)
 from battery_predictor.ocp import ocp_origin
 
 if TYPE_CHECKING:
@@ -81,7 +88,7 @@ def run_identify(args: argparse.Namespace) -> int:
                     "tpe_evaluations": result.tpe_evaluations, "seconds": result.seconds,
                     "coordinates": result.coordinates, "params": best.values[0],
                     "identifiability": report.to_dict(), "ocp": ocp_origin(params), "thermal": thermal,
-                    "out": str(out), "plot": str(plot_path)})
+                    "engine_fallback": engine_fallback(best.results), "out": str(out), "plot": str(plot_path)})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
           f"({result.evaluations} evaluations, {result.seconds:.0f} s; {ocp_origin(params)}; {thermal} cell)")
@@ -90,6 +97,8 @@ def run_identify(args: argparse.Namespace) -> int:
               f"[{c.low:.4g}, {c.high:.4g}]{' log' if c.log else ''}")
     for line in report.summary_lines():
         print(line)
+    if engine_fallback(best.results):
+        print(f"engine fallback: {engine_fallback(best.results)}")
     print(f"wrote {out} and {plot_path}")
     return 0
 

@@ -304,18 +304,18 @@ class PredictorNode(Node):
 
     # --------------------------------------------------------------- helpers
     def _compile_route_kernel(self, core: PredictorCore) -> None:
-        """Run a short route end once, so the first ``can_accept_route`` does not compile the engine's kernel.
+        """Compile the engine's kernels at start-up, so the first route answer and runtime update do not.
 
-        The engine answers a route with its fused compiled kernel (``EnginePack.run_end``), which
-        is compiled on first use (seconds); PyBaMM stepping has nothing to compile.
+        The engine answers a route with its fused compiled kernel (``EnginePack.run_end``) and a runtime
+        update with the compiled two-pass pieces (``EnginePack.run``), compiled on first use (seconds,
+        holding the GIL); PyBaMM stepping has nothing to compile.
         """
-        run_end = getattr(core.runner, "run_end", None)
-        if run_end is None:
+        warm_up = getattr(core.runner, "warm_up", None)
+        if warm_up is None:
             return
         t0 = time.perf_counter()
-        low, high = core.runner.soc_bounds
         try:
-            run_end(0.5 * (low + high), [(60.0, 1.0), (60.0, 0.5)], core.default_temperature_k)
+            warm_up(core.default_temperature_k)
         except BatteryPredictorError as exc:
             self.get_logger().warning(f"route kernel warm-up failed (the first route answer compiles it): {exc}")
             return

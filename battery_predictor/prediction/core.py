@@ -15,7 +15,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -24,6 +24,7 @@ from battery_predictor.params import PackParams, load_params
 from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, history_segments
 from battery_predictor.prediction.load_estimate import LoadEstimator, LoadKind
 from battery_predictor.prediction.pack_model import PackModel, pack_model
+from battery_predictor.prediction.priority import RoutePriority, YieldingRunner
 from battery_predictor.prediction.route import RouteDecision, rejected
 from battery_predictor.prediction.runtime import RuntimePrediction, predict_remaining_runtime
 from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v, unexplained_jump_v
@@ -222,6 +223,8 @@ class PredictorCore:
         self.runner: PackModel | None = None
         #: Which pack model answers, and why (engine or PyBaMM stepping).
         self.model_backend = ""
+        #: Route answers in progress: a runtime update's model runs wait for them (:mod:`.priority`).
+        self.route_priority = RoutePriority()
         try:
             self.params = params or load_params(Path(config.params_file))
             self.runner, self.model_backend = pack_model(self.params, config.simulator)
@@ -441,7 +444,7 @@ class PredictorCore:
         mean_power_w = load.mean_power_w if kind.exponent > 0 else math.nan
         power = mean_power_w if math.isfinite(mean_power_w) and mean_power_w > 0 else None
         try:
-            pred = predict_remaining_runtime(self._runner(), v, i, temp, avg, cutoff,
+            pred = predict_remaining_runtime(self._background_runner(), v, i, temp, avg, cutoff,
                                              calibration=self.calibration(temp),
                                              peak_current_a=peak if math.isfinite(peak) else None,
                                              peak_duration_s=self._peak_duration_s(), average_power_w=power,
@@ -495,10 +498,14 @@ class PredictorCore:
         sigma = future_load_sigma(stamps, demand, pred.average_end_s)
         load = replace(load, sigma=sigma if math.isfinite(sigma) else 0.0)
         try:
-            return runtime_spread(self._runner(), pred.calibration.start, pred.calibration.soc, pred, load,
+            return runtime_spread(self._background_runner(), pred.calibration.start, pred.calibration.soc, pred, load,
                                   self.uncertainty, self.state_voltage_sigma_v(pred.calibration), voltage_v)
         except BatteryPredictorError:
             return None
+
+    def _background_runner(self) -> PackModel:
+        """The pack model for the runtime update: each run first waits for route answers in progress."""
+        return cast(PackModel, YieldingRunner(self._runner(), self.route_priority))
 
     def _load_kind(self, resistance_ohm: float) -> LoadKind:
         """The load model ahead: the configured kind, or (``"auto"``) the cycle's (call under the lock)."""
@@ -514,8 +521,14 @@ class PredictorCore:
 
         Accepted only when the latest measurement, moved to the standstill current, is above the
         threshold, the freshly calibrated state reproduces the measurement within
-        ``state_tolerance_v`` and the simulated route ends above the threshold.
+        ``state_tolerance_v`` and the simulated route ends above the threshold. A runtime update
+        running meanwhile pauses between its model runs until the answer is out (:mod:`.priority`).
         """
+        with self.route_priority.answering():
+            return self._can_accept_route(sections, now_s, starts_away_from_charger, ends_away_from_charger)
+
+    def _can_accept_route(self, sections: Sequence[RouteSection], now_s: float, starts_away_from_charger: bool,
+                          ends_away_from_charger: bool) -> RouteDecision:
         threshold = self.route_min_voltage_v
         if not math.isfinite(threshold):
             return rejected("params define no route threshold (thresholds.route_min_voltage_v)", threshold)

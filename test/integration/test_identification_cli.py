@@ -46,6 +46,7 @@ def test_fit_identify_json_reports_budget_coordinates_and_identifiability(one_se
     assert proc.returncode == 0, proc.stderr
     obj = json.loads(proc.stdout)
     assert obj["method"] == "identify"
+    assert obj["engine_fallback"] is None  # the shipped cell runs on the engine
     assert obj["evaluations"] <= 16
     names = [p["name"] for p in obj["identifiability"]["parameters"]]
     assert names[:4] == ["negative_capacity_ah", "positive_capacity_ah", "negative_stoichiometry",

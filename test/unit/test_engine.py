@@ -23,7 +23,13 @@ from battery_predictor.simulation.engine.model import (
     _built_simulation,
     extract_linear_spm,
 )
-from battery_predictor.simulation.engine.run import ParameterSets, run_cells
+from battery_predictor.simulation.engine.run import (
+    ParameterSets,
+    run_cells,
+    set_surfaces_at_times,
+    states_at_times,
+    voltages_at_times,
+)
 
 
 @pytest.fixture(scope="module")
@@ -233,6 +239,32 @@ def test_fused_kernel_matches_the_numpy_path_including_the_cutoff(temi_spm):
     np.testing.assert_allclose(fused.end_voltage_v, plain.end_voltage_v, rtol=0, atol=1e-10)
 
 
+def test_two_pass_path_compiled_voltage_and_root_match_numpy_including_the_cutoff(temi_spm):
+    pytest.importorskip("numba")
+    model, modal = temi_spm
+    rng = np.random.default_rng(9)
+    duration_s = rng.choice([2.0, 5.0, 7.5], 900)
+    current_a = rng.uniform(0.0, 2.0, 900)
+    c_n0 = np.array([0.08, 0.3, 0.9]) * model.blocks[0].scale_mol_m3
+    c_p0 = model.built_values[C_P0] + (model.built_values[C_N0] - c_n0) * 0.5
+    sets = ParameterSets(radius_p=np.array([1.0, 1.1, 0.9]), fraction_n=np.array([1.0, 0.85, 1.15]))
+    common = dict(c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0, temperature_k=298.15, sets=sets, keep_states=True)
+    compiled = run_cells(model, modal, duration_s, current_a, backend="auto", **common)
+    plain = run_cells(model, modal, duration_s, current_a, backend="numpy", **common)
+    assert compiled.extra["kernels"] is not None and plain.extra["kernels"] is None
+    assert compiled.reached_cutoff[0] and not compiled.reached_cutoff[2]
+    np.testing.assert_array_equal(compiled.cutoff_step, plain.cutoff_step)
+    np.testing.assert_allclose(compiled.end_time_s, plain.end_time_s, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(compiled.start_voltage_v, plain.start_voltage_v, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(compiled.end_voltage_v, plain.end_voltage_v, rtol=0, atol=1e-12)
+    times = np.sort(rng.uniform(0.0, compiled.end_time_s.min(), 300))
+    np.testing.assert_allclose(voltages_at_times(model, compiled, modal, duration_s, current_a, times),
+                               voltages_at_times(model, plain, modal, duration_s, current_a, times), rtol=0, atol=1e-12)
+    for s in range(3):
+        np.testing.assert_allclose(set_surfaces_at_times(compiled, modal, duration_s, current_a, times, s),
+                                   states_at_times(plain, modal, duration_s, current_a, times)[s], rtol=0, atol=1e-14)
+
+
 class _StubSimulator:
     name = "stub"
 
@@ -392,6 +424,7 @@ def test_a_voltage_without_a_scalar_form_runs_on_the_numpy_voltage(temi_spm, mon
 
     model, modal = temi_spm
     monkeypatch.setattr(run_module, "fused_kernel", lambda *args, **kwargs: None)
+    monkeypatch.setattr(run_module, "voltage_kernels", lambda *args, **kwargs: None)
     runs = run_cells(model, modal, np.full(50, 5.0), np.full(50, 2.0), c_n0_mol_m3=model.built_values[C_N0],
                      c_p0_mol_m3=model.built_values[C_P0], temperature_k=298.15)
     assert runs.extra["backend"] in ("numba", "numpy")

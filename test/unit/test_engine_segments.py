@@ -99,3 +99,15 @@ def test_temperature_extension_matches_the_pybamm_pack_model_in_the_cold(ranger_
     assert engine.pack_voltage_v[-1] < warm.pack_voltage_v[-1] - 0.01
     with pytest.raises(SimulationError, match="series_activation_j_mol"):
         EnginePack(params)
+
+
+def test_warm_up_compiles_the_route_kernel_and_the_sampled_run(ranger_params):
+    pytest.importorskip("numba")
+    from battery_predictor.simulation.engine.kernel import fused_kernel, voltage_kernels
+
+    pack = EnginePack(ranger_params)
+    pack.warm_up(298.15)
+    kernels = voltage_kernels(pack.model)
+    assert kernels is not None and fused_kernel(pack.model).signatures
+    for compiled in (kernels.grid, kernels.cutoff_roots, kernels.surfaces_within):
+        assert compiled.signatures  # compiled, so the first runtime update does not compile them

@@ -107,6 +107,10 @@ def test_the_engine_simulator_hands_a_stoichiometry_dependent_diffusivity_on_vis
         result = EngineSimulator().simulate(params, request)
     assert "depends on the stoichiometry" in result.extra["engine_fallback"]
     assert "depends on the stoichiometry" in caplog.text
+    # callers that ask before simulating (the diagnosis' reference fit) learn it as well
+    assert "depends on the stoichiometry" in EngineSimulator.unsupported_reason(params, request)
+    neutral = ranger_params.with_values({EA_POS_FULL: 0.0}, extensions=("temperature",))
+    assert EngineSimulator.unsupported_reason(neutral, request) is None
 
 
 def test_simulate_json_reports_the_engine_time_and_a_fallback(ranger_params, tmp_path, capsys):

@@ -8,6 +8,12 @@ Expressions using anything else (interpolated data, constants arrays) have no co
 :func:`fused_kernel` then returns None and the caller uses the NumPy path. A lumped thermal cell's
 heat equation is printed the same way for the thermal recurrence (:func:`thermal_kernel`,
 :mod:`~battery_predictor.simulation.engine.thermal`).
+
+The fused kernel and the two-pass pieces (:class:`VoltageKernels`) are written with the printed
+voltage to a module file per voltage and compiled with Numba's disk cache
+(:mod:`~battery_predictor.simulation.engine.kernel_module`): a new process loads them in about a
+second instead of compiling them (several seconds). The thermal kernel is compiled in memory
+(no disk cache). Every compiled function releases the GIL.
 """
 
 from __future__ import annotations
@@ -16,17 +22,14 @@ import math
 import re
 import weakref
 from collections.abc import Callable
-from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from battery_predictor.simulation.engine.model import CURRENT, THERMAL_ROWS, VOLTAGE_ROWS, LinearSpm
 
-if TYPE_CHECKING:
-    import pybamm
-
-#: A compiled kernel (a Numba dispatcher): NumPy arrays and scalars in, its results written into output arrays.
+#: A compiled Numba function (its argument types are fixed by Numba at the first call).
 Kernel = Callable[..., Any]
 
 #: NumPy functions of the printed voltage expression and their scalar replacements.
@@ -37,11 +40,9 @@ _SCALAR_FUNCTIONS = {
 }
 _ROW = re.compile(r"y\[(\d+):(\d+)\]")
 _NP_CALL = re.compile(r"np\.\w+")
-_NAME = re.compile(r"\b(?:var_m?\d+|y\d+)\b")
+_NAME = re.compile(r"\b(?:var_m?\d+|tmp\d+|y\d+)\b")
 #: Compiled kernels by (printed voltage source, parallel).
-_CACHE: dict[tuple, Kernel] = {}
-#: Compiled thermal recurrences and whether they write the voltage, by (rate source, voltage source, parallel).
-_THERMAL_CACHE: dict[tuple, tuple[Kernel, bool]] = {}
+_CACHE: dict[tuple, Any] = {}
 #: Printed voltage source by model (printing takes milliseconds).
 _SOURCES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 #: Printed heat-equation source by model (thermal cells).
@@ -50,7 +51,7 @@ _RATE_SOURCES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 PARALLEL_MIN_SETS = 64
 
 
-def _scalar_lines(symbol: pybamm.Symbol, n_rows: int) -> tuple[list[str], str] | None:
+def _scalar_lines(symbol, n_rows: int) -> tuple[list[str], str] | None:
     """PyBaMM's printed NumPy statements of ``symbol`` as scalar statements on ``y0 .. y{n_rows-1}``.
 
     Returns (statements, name of the result), or None when the expression has no scalar form.
@@ -71,8 +72,22 @@ def _scalar_lines(symbol: pybamm.Symbol, n_rows: int) -> tuple[list[str], str] |
         body = re.sub(re.escape(call) + r"\b", scalar, body)
     if "[" in body or "@" in body:
         return None
-    lines = [line for line in body.splitlines() if line.strip()]
+    lines = _canonical_names([line for line in body.splitlines() if line.strip()])
     return lines, lines[-1].split("=", 1)[0].strip()
+
+
+def _canonical_names(lines: list[str]) -> list[str]:
+    """PyBaMM's temporaries (``var_<symbol id>``, ids that differ from process to process) renamed ``tmp0, tmp1, ...``
+    in order of appearance, so that one expression prints the same source in every process (the disk cache's key)."""
+    names: dict[str, str] = {}
+
+    def rename(match: re.Match) -> str:
+        name = match.group(0)
+        if name.startswith("y"):
+            return name
+        return names.setdefault(name, f"tmp{len(names)}")
+
+    return [_NAME.sub(rename, line) for line in lines]
 
 
 def scalar_voltage_source(model: LinearSpm) -> str | None:
@@ -129,12 +144,70 @@ def _pair_source(lines: list[str], result: str) -> str:
     return f"def cell_voltage_pair({args}):\n    " + "\n    ".join(body) + f"\n    return {out_a}, {out_b}\n"
 
 
-def fused_kernel(model: LinearSpm, *, parallel: bool = False) -> Kernel | None:
+def fused_kernel(model: LinearSpm, *, parallel: bool = False):
     """The compiled run kernel for ``model``'s voltage, or None (no Numba, or no scalar form).
 
     ``parallel`` selects the variant that spreads the sets over the cores (its compilation
-    takes several seconds, so single runs use the serial one).
+    takes several seconds, so single runs use the serial one). The kernel releases the GIL.
     """
+    scalar = _scalar_kernels(model)
+    if scalar is None:
+        return None
+    return scalar.run_parallel if parallel else scalar.run_serial
+
+
+@dataclass(frozen=True)
+class VoltageKernels:
+    """A model's printed voltage compiled for the two-pass path (every function releases the GIL).
+
+    Attributes
+    ----------
+    source : str
+        The printed voltage source they were compiled from.
+    voltage, voltage_pair : callable
+        ``cell_voltage(y0, ..., y6)`` and ``cell_voltage_pair`` (:func:`scalar_voltage_source`), scalar.
+    cutoff_root : callable
+        ``cutoff_root(z, lam, drive, weights, h_s, current_a, v0, v1, temperature_k, eps_n, eps_p,
+        height_m, cutoff_v, tol_s)``: :attr:`cutoff_roots` for one set (scalars and (n_modes,) rows).
+    grid : callable
+        ``grid(s_n, s_p, current_a, temperature_k, eps_n, eps_p, height_m, out)``: the cell voltage (V)
+        into ``out`` (n_sets, n) at surface stoichiometries (n_sets, n), cell currents (A; (n_sets, n)
+        or (1, n)) and per-set temperature (K), volume fractions and electrode height (m) ((n_sets,)).
+    cutoff_roots : callable
+        ``cutoff_roots(z, lam, drive, weights, h_s, current_a, v0, v1, temperature_k, eps_n, eps_p,
+        height_m, cutoff_v, tol_s)``: time into the step (s, (n,)) at which the voltage meets
+        ``cutoff_v`` for modal states ``z`` (n, n_modes) at step starts, steps of ``h_s`` s under
+        ``current_a`` A with voltages ``v0`` above and ``v1`` below the cut-off at their ends: the
+        fused kernel's Illinois regula falsi on the exact within-step solution, to ``tol_s``.
+    within : callable
+        ``within(z, lam, drive, weights, tau_s, current_a) -> (s_n, s_p)``: surface stoichiometries
+        ``tau_s`` s into a step from modal state ``z`` (one set).
+    surfaces_within : callable
+        ``surfaces_within(checkpoints, lam, drive, weights, step, tau_s, current_a, out)``: surface
+        stoichiometries (n, 2) into ``out``, ``tau_s[k]`` s into step ``step[k]`` from the state at that
+        step's start (``checkpoints`` (n_steps + 1, n_modes), one set) under ``current_a[k]`` A.
+    run_serial, run_parallel : callable
+        The fused run kernel (:func:`fused_kernel`), sets one after the other or spread over the cores.
+    """
+
+    source: str
+    voltage: Callable[..., Any]
+    voltage_pair: Callable[..., Any]
+    cutoff_root: Callable[..., Any]
+    grid: Callable[..., Any]
+    cutoff_roots: Callable[..., Any]
+    within: Callable[..., Any]
+    surfaces_within: Callable[..., Any]
+    run_serial: Callable[..., Any]
+    run_parallel: Callable[..., Any]
+
+
+def voltage_kernels(model: LinearSpm) -> VoltageKernels | None:
+    """The compiled voltage pieces of ``model`` (:class:`VoltageKernels`), or None (no Numba, no scalar form)."""
+    return _scalar_kernels(model)
+
+
+def _scalar_kernels(model: LinearSpm) -> VoltageKernels | None:
     try:
         import numba
     except ImportError:
@@ -144,13 +217,13 @@ def fused_kernel(model: LinearSpm, *, parallel: bool = False) -> Kernel | None:
     source = _SOURCES[model]
     if not source:
         return None
-    key = (source, bool(parallel))
+    key = ("scalar", source)
     if key not in _CACHE:
-        _CACHE[key] = _compile(numba, source, bool(parallel))
+        _CACHE[key] = _compile_scalar(numba, source)
     return _CACHE[key]
 
 
-def thermal_kernel(model: LinearSpm, *, parallel: bool = False) -> tuple[Kernel, bool] | None:
+def thermal_kernel(model: LinearSpm, *, parallel: bool = False):
     """The compiled thermal recurrence for ``model``'s heat equation, or None (no Numba, or no scalar form).
 
     When the voltage has a scalar form too the kernel also writes the voltage at every step start
@@ -169,9 +242,9 @@ def thermal_kernel(model: LinearSpm, *, parallel: bool = False) -> tuple[Kernel,
         _SOURCES[model] = scalar_voltage_source(model) or ""
     voltage_source = _SOURCES[model]
     key = ("thermal", source, voltage_source, bool(parallel))
-    if key not in _THERMAL_CACHE:
-        _THERMAL_CACHE[key] = compile_thermal_kernel(numba, source, voltage_source, bool(parallel))
-    return _THERMAL_CACHE[key]
+    if key not in _CACHE:
+        _CACHE[key] = compile_thermal_kernel(numba, source, voltage_source, bool(parallel))
+    return _CACHE[key]
 
 
 def forget_thermal_kernel(model: LinearSpm) -> None:
@@ -184,125 +257,18 @@ def forget_kernel(model: LinearSpm) -> None:
     _SOURCES[model] = ""
 
 
-def _compile(numba: ModuleType, source: str, parallel: bool) -> Kernel:
-    namespace: dict = {"math": math}
-    exec(compile(source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - code printed by PyBaMM from the model
-    voltage = numba.njit(fastmath=False)(namespace["cell_voltage"])
-    voltage_pair = numba.njit(fastmath=False)(namespace["cell_voltage_pair"])
+def _compile_scalar(numba, source: str) -> VoltageKernels:
+    """The printed voltage and the kernels built on it (:mod:`.kernel_module`; compiled, or loaded from Numba's
+    disk cache, at their first call)."""
+    from battery_predictor.simulation.engine.kernel_module import kernel_module
 
-    @numba.njit(fastmath=False)
-    def within(z, lam, drive, weights, tau, current):  # pragma: no cover - compiled
-        sn = 0.0
-        sp = 0.0
-        for j in range(z.shape[0]):
-            x = lam[j] * tau
-            if lam[j] == 0.0:
-                zj = z[j] + tau * drive[j] * current
-            else:
-                zj = math.exp(x) * z[j] + math.expm1(x) / lam[j] * drive[j] * current
-            sn += weights[0, j] * zj
-            sp += weights[1, j] * zj
-        return sn, sp
-
-    @numba.njit(parallel=parallel, fastmath=False)
-    def kernel(lam, drive, z0, duration_s, current_a, weights, temperature_k, eps_n, eps_p, height_m, cutoff_v,
-               tol_s, start_v, end_v, end_time, cutoff_step, at_start, z_end):  # pragma: no cover - compiled
-        n_sets, n_modes = z0.shape
-        n_steps = duration_s.shape[0]
-        for s in numba.prange(n_sets):
-            z = z0[s].copy()
-            decay = np.empty(n_modes)
-            phid = np.empty(n_modes)
-            last_h = -1.0
-            t = 0.0
-            cutoff_step[s] = n_steps
-            at_start[s] = False
-            end_time[s] = 0.0
-            temp, en, ep, hh = temperature_k[s], eps_n[s], eps_p[s], height_m[s]
-            sn = 0.0
-            sp = 0.0
-            for j in range(n_modes):
-                sn += weights[0, j] * z[j]
-                sp += weights[1, j] * z[j]
-            v_next = voltage(sn, sp, current_a[0], temp, en, ep, hh)
-            for k in range(n_steps):
-                h = duration_s[k]
-                i = current_a[k]
-                v0 = v_next
-                start_v[s, k] = v0
-                if not v0 >= cutoff_v:
-                    cutoff_step[s] = k
-                    at_start[s] = True
-                    end_time[s] = t
-                    break
-                if h != last_h:
-                    for j in range(n_modes):
-                        x = lam[s, j] * h
-                        decay[j] = math.exp(x)
-                        if lam[s, j] == 0.0:
-                            phid[j] = h * drive[s, j]
-                        else:
-                            phid[j] = math.expm1(x) / lam[s, j] * drive[s, j]
-                    last_h = h
-                sn = 0.0
-                sp = 0.0
-                for j in range(n_modes):
-                    zj = decay[j] * z[j] + phid[j] * i
-                    sn += weights[0, j] * zj
-                    sp += weights[1, j] * zj
-                if k + 1 < n_steps:  # the step's end and the next step's start share the state
-                    v1, v_next = voltage_pair(sn, sp, i, current_a[k + 1], temp, en, ep, hh)
-                else:
-                    v1 = voltage(sn, sp, i, temp, en, ep, hh)
-                if not v1 >= cutoff_v:
-                    # root inside the step: Illinois regula falsi on the exact within-step solution
-                    lo, hi, f_lo, f_hi, side = 0.0, h, v0 - cutoff_v, v1 - cutoff_v, 0
-                    for _ in range(100):
-                        if hi - lo <= tol_s:
-                            break
-                        mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-                        if not (lo < mid < hi):
-                            mid = 0.5 * (lo + hi)
-                        a, b = within(z, lam[s], drive[s], weights, mid, i)
-                        f_mid = voltage(a, b, i, temp, en, ep, hh) - cutoff_v
-                        if f_mid == 0.0:
-                            lo = mid
-                            hi = mid
-                            break
-                        if f_mid < 0.0:
-                            hi, f_hi = mid, f_mid
-                            if side == -1:
-                                f_lo *= 0.5
-                            side = -1
-                        else:
-                            lo, f_lo = mid, f_mid
-                            if side == 1:
-                                f_hi *= 0.5
-                            side = 1
-                    cutoff_step[s] = k
-                    tau = 0.5 * (lo + hi)
-                    end_time[s] = t + tau
-                    for j in range(n_modes):
-                        x = lam[s, j] * tau
-                        if lam[s, j] == 0.0:
-                            z[j] = z[j] + tau * drive[s, j] * i
-                        else:
-                            z[j] = math.exp(x) * z[j] + math.expm1(x) / lam[s, j] * drive[s, j] * i
-                    break
-                end_v[s, k] = v1
-                for j in range(n_modes):
-                    z[j] = decay[j] * z[j] + phid[j] * i
-                t += h
-            if cutoff_step[s] == n_steps:
-                end_time[s] = t
-            for j in range(n_modes):
-                z_end[s, j] = z[j]
-
-    return kernel
+    module = kernel_module(numba, source)
+    return VoltageKernels(source, module.cell_voltage, module.cell_voltage_pair, module.cutoff_root, module.grid,
+                          module.cutoff_roots, module.within, module.surfaces_within, module.run_serial,
+                          module.run_parallel)
 
 
-def compile_thermal_kernel(numba: ModuleType, rate_source: str, voltage_source: str,
-                           parallel: bool) -> tuple[Kernel, bool]:
+def compile_thermal_kernel(numba, rate_source: str, voltage_source: str, parallel: bool):
     """The compiled recurrence for a heat equation printed as ``cell_rate(y0, ..., y7)`` (:func:`scalar_rate_source`).
 
     With a ``voltage_source`` (``cell_voltage`` and ``cell_voltage_pair``, above) the kernel writes
@@ -310,22 +276,22 @@ def compile_thermal_kernel(numba: ModuleType, rate_source: str, voltage_source: 
     """
     namespace: dict = {"math": math}
     exec(compile(rate_source, "<pybamm heat equation>", "exec"), namespace)  # noqa: S102 - printed by PyBaMM
-    rate = numba.njit(fastmath=False)(namespace["cell_rate"])
+    rate = numba.njit(fastmath=False, nogil=True)(namespace["cell_rate"])
     has_voltage = bool(voltage_source)
     if has_voltage:
         exec(compile(voltage_source, "<pybamm voltage>", "exec"), namespace)  # noqa: S102 - printed by PyBaMM
-        voltage = numba.njit(fastmath=False)(namespace["cell_voltage"])
-        voltage_pair = numba.njit(fastmath=False)(namespace["cell_voltage_pair"])
+        voltage = numba.njit(fastmath=False, nogil=True)(namespace["cell_voltage"])
+        voltage_pair = numba.njit(fastmath=False, nogil=True)(namespace["cell_voltage_pair"])
     else:
-        @numba.njit(fastmath=False)
+        @numba.njit(fastmath=False, nogil=True)
         def voltage(y0, y1, y2, y3, y4, y5, y6):  # pragma: no cover - compiled, never called
             return math.nan
 
-        @numba.njit(fastmath=False)
+        @numba.njit(fastmath=False, nogil=True)
         def voltage_pair(y0, y1, y2a, y2b, y3, y4, y5, y6):  # pragma: no cover - compiled, never called
             return math.nan, math.nan
 
-    @numba.njit(parallel=parallel, fastmath=False)
+    @numba.njit(parallel=parallel, fastmath=False, nogil=True)
     def kernel(lam, drive, z0, temperature0_k, ambient_k, eps_n, eps_p, height_m, heat_rate, duration_s, current_a,
                weights,
                n_neg, inv0, dinv, ln_factor, constant, stride, surfaces, temps, factors, states,

@@ -186,7 +186,7 @@ def _compile(numba: ModuleType) -> Callable[..., None]:
     if "kernel" in _KERNEL_CACHE:
         return _KERNEL_CACHE["kernel"]
 
-    @numba.njit(cache=True, fastmath=False)
+    @numba.njit(cache=True, fastmath=False, nogil=True)
     def kernel(lam: np.ndarray, drive: np.ndarray, z0: np.ndarray, duration_s: np.ndarray, current_a: np.ndarray,
                weights: np.ndarray, stride: int, surfaces: np.ndarray, checkpoints: np.ndarray,
                z_end: np.ndarray) -> None:  # pragma: no cover - compiled

@@ -22,7 +22,14 @@ import numpy as np
 import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
-from battery_predictor.simulation.engine.kernel import PARALLEL_MIN_SETS, Kernel, forget_kernel, fused_kernel
+from battery_predictor.simulation.engine.kernel import (
+    PARALLEL_MIN_SETS,
+    Kernel,
+    VoltageKernels,
+    forget_kernel,
+    fused_kernel,
+    voltage_kernels,
+)
 from battery_predictor.simulation.engine.modal import (
     ModalSystem,
     boundary_surfaces,
@@ -162,18 +169,39 @@ def _batch(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: in
 
 
 def _voltage(model: LinearSpm, batch: _Batch, surfaces: np.ndarray, current_a: np.ndarray,
-             temperature_k: np.ndarray | None = None) -> np.ndarray:
+             temperature_k: np.ndarray | None = None, kernels: VoltageKernels | None = None) -> np.ndarray:
     """Cell voltage (V) for surfaces (n_sets, n, 2), currents broadcast to (n_sets, n) and cell temperatures
-    (K, (n_sets, n); the batch's isothermal temperature when None)."""
+    (K, (n_sets, n); the batch's isothermal temperature when None).
+
+    With ``kernels`` (isothermal only) the compiled printed voltage evaluates it, without the GIL.
+    """
+    if kernels is not None and temperature_k is None:
+        return compiled_voltage(kernels, batch, surfaces, current_a)
     col = (slice(None), None)
     temperature_k = batch.temperature_k[col] if temperature_k is None else temperature_k
     return model.cell_voltage_v(surfaces[..., 0], surfaces[..., 1], current_a, temperature_k,
                                 batch.eps_n[col], batch.eps_p[col], batch.height_m[col])
 
 
+def compiled_voltage(kernels: VoltageKernels, batch: _Batch, surfaces: np.ndarray,
+                     current_a: npt.ArrayLike) -> np.ndarray:
+    """Cell voltage (V, (n_sets, n)) of an isothermal batch at surfaces (n_sets, n, 2) under cell currents
+    (A) broadcast to (n_sets, n), by the compiled printed voltage (:class:`~.kernel.VoltageKernels`)."""
+    shape = surfaces.shape[:2]
+    current = np.asarray(current_a, dtype=float)
+    if current.ndim != 2 or current.shape[0] not in (1, shape[0]):
+        current = np.broadcast_to(current, shape)
+    out = np.empty(shape)
+    kernels.grid(np.ascontiguousarray(surfaces[..., 0]), np.ascontiguousarray(surfaces[..., 1]),
+                 np.ascontiguousarray(np.broadcast_to(current, (current.shape[0], shape[1]))),
+                 *(np.ascontiguousarray(np.broadcast_to(v, shape[:1]), dtype=float)
+                   for v in (batch.temperature_k, batch.eps_n, batch.eps_p, batch.height_m)), out)
+    return out
+
+
 def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, cell_current_a: npt.ArrayLike, *,
-              c_n0_mol_m3: npt.ArrayLike | None = None, c_p0_mol_m3: npt.ArrayLike | None = None,
-              temperature_k: npt.ArrayLike, sets: ParameterSets | None = None, backend: str = "auto",
+              c_n0_mol_m3: npt.ArrayLike | None = None,
+              c_p0_mol_m3: npt.ArrayLike | None = None, temperature_k: npt.ArrayLike, sets: ParameterSets | None = None, backend: str = "auto",
               keep_states: bool = False, initial_state: tuple[np.ndarray, np.ndarray] | None = None,
               initial_temperature_k: npt.ArrayLike | None = None,
               diffusivity_temperature: DiffusivityTemperature | None = None) -> CellRuns:
@@ -227,8 +255,8 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, c
     if (initial_state is None) == (c_n0_mol_m3 is None or c_p0_mol_m3 is None):
         raise SimulationError("give either both initial concentrations or an initial state")
     n_state_sets = 1 if initial_state is None else max(np.atleast_2d(y).shape[0] for y in initial_state)
-    n_c0 = max(1 if c is None else np.size(c) for c in (c_n0_mol_m3, c_p0_mol_m3))
-    n_sets = max(sets.size(), n_c0, np.size(temperature_k), n_state_sets)
+    n_sets = max(sets.size(), np.size(c_n0_mol_m3 if c_n0_mol_m3 is not None else 0.0),
+                 np.size(c_p0_mol_m3 if c_p0_mol_m3 is not None else 0.0), np.size(temperature_k), n_state_sets)
     batch = _batch(model, modal, sets, n_sets, temperature_k)
     if initial_state is None:
         c_max_n = model.blocks[0].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_n, dtype=float), (n_sets,))
@@ -299,12 +327,32 @@ def _check_range(start_v: np.ndarray, end_v: np.ndarray, edges: np.ndarray) -> N
 
 def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.ndarray, duration_s: np.ndarray,
                   current: np.ndarray, edges: np.ndarray, backend: str, stride: int) -> CellRuns:
-    """States at every boundary (Numba or NumPy recurrence), then the voltage on all of them (NumPy)."""
+    """States at every boundary (Numba or NumPy recurrence), then the voltage on all of them and the cut-off root.
+
+    With Numba the voltage and the root are the compiled printed voltage's (the fused kernel's root, without
+    the GIL); otherwise, or when it does not compile, PyBaMM's NumPy voltage and :func:`_cutoff_in_step`.
+    """
+    kernels = None if backend == "numpy" else voltage_kernels(model)
+    if kernels is not None:
+        from numba.core.errors import NumbaError
+
+        try:
+            return _two_pass(model, modal, batch, z0, duration_s, current, edges, backend, stride, kernels)
+        except NumbaError as exc:  # the printed voltage did not compile: the NumPy voltage is the same expression
+            LOG.warning("engine: the compiled voltage does not compile for this model (%s); using NumPy's",
+                        str(exc).splitlines()[0])
+            forget_kernel(model)
+    return _two_pass(model, modal, batch, z0, duration_s, current, edges, backend, stride, None)
+
+
+def _two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.ndarray, duration_s: np.ndarray,
+              current: np.ndarray, edges: np.ndarray, backend: str, stride: int,
+              kernels: VoltageKernels | None) -> CellRuns:
     n_sets = z0.shape[0]
     surfaces, checkpoints, z_end = boundary_surfaces(batch.lam, batch.drive, z0, duration_s, current,
                                                      modal.surface_weights, stride=stride, backend=backend)
-    start_v = _voltage(model, batch, surfaces[:, :-1], current[None, :])
-    end_v = _voltage(model, batch, surfaces[:, 1:], current[None, :])
+    start_v = _voltage(model, batch, surfaces[:, :-1], current[None, :], kernels=kernels)
+    end_v = _voltage(model, batch, surfaces[:, 1:], current[None, :], kernels=kernels)
     if not (np.all(np.isfinite(start_v)) and np.all(np.isfinite(end_v))):
         raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
     _check_range(start_v, end_v, edges)
@@ -320,8 +368,12 @@ def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nd
     if inside.size:
         z_k = states_at(batch.lam[inside], batch.drive[inside], checkpoints[inside], duration_s, current,
                         cutoff_step[inside], stride)
-        tau = _cutoff_in_step(model, modal, _take(batch, inside), z_k, duration_s[cutoff_step[inside]],
-                              current[cutoff_step[inside]])
+        k = cutoff_step[inside]
+        if kernels is None:
+            tau = _cutoff_in_step(model, modal, _take(batch, inside), z_k, duration_s[k], current[k])
+        else:
+            tau = _compiled_cutoff(kernels, model, modal, _take(batch, inside), z_k, duration_s[k], current[k],
+                                   start_v[inside, k], end_v[inside, k])
         end_time[inside] = edges[cutoff_step[inside]] + tau
         decay, phi = step_coefficients(batch.lam[inside], tau[:, None])
         z_final[inside] = decay * z_k + phi * batch.drive[inside] * current[cutoff_step[inside]][:, None]
@@ -335,7 +387,7 @@ def _run_two_pass(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nd
     end_v = np.where(cols >= cutoff_step[:, None], np.nan, end_v)
     used = "numpy" if backend == "numpy" or not numba_available() else "numba"
     extra = {"checkpoints": checkpoints, "stride": stride, "z_end": z_end, "lam": batch.lam, "drive": batch.drive,
-             "batch": batch, "backend": used, "surfaces": surfaces}
+             "batch": batch, "backend": used, "surfaces": surfaces, "kernels": kernels}
     return CellRuns(step_start_s=edges[:-1], start_voltage_v=start_v, end_voltage_v=end_v, end_time_s=end_time,
                     reached_cutoff=any_below, cutoff_step=cutoff_step, final_state=modal.block_states(z_final),
                     extra=extra)
@@ -448,8 +500,8 @@ def _run_thermal(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nda
                     final_state=modal.block_states(z_final), extra=extra)
 
 
-def _temperature_within(model: LinearSpm, batch: _Batch, s_k: np.ndarray, s_tau: np.ndarray,
-                        current_a: np.ndarray | float, t_k: np.ndarray, tau: np.ndarray | float) -> np.ndarray:
+def _temperature_within(model: LinearSpm, batch: _Batch, s_k: np.ndarray, s_tau: np.ndarray, current_a: npt.ArrayLike,
+                        t_k: np.ndarray, tau: npt.ArrayLike) -> np.ndarray:
     """Cell temperature (K) ``tau`` into a step: Heun's step of length ``tau`` from ``(s_k, t_k)`` (surfaces
     (..., 2) at the step start and at ``tau``), the recurrence's own rule, so that it needs nothing past ``tau``
     (the step's end may lie past a cut-off where the cell emptied)."""
@@ -462,6 +514,7 @@ def _temperature_within(model: LinearSpm, batch: _Batch, s_k: np.ndarray, s_tau:
                                                                     batch.height_m)
 
     r0 = rate(s_k, t_k)
+    tau = np.asarray(tau, dtype=float)
     return t_k + 0.5 * tau * (r0 + rate(s_tau, t_k + tau * r0))
 
 
@@ -481,6 +534,20 @@ def _within_step(modal: ModalSystem, batch: _Batch, z_k: np.ndarray, tau_s: np.n
     decay, phi = step_coefficients(batch.lam, tau_s[:, None])
     z = decay * z_k + phi * batch.drive * current_a[:, None]
     return z @ modal.surface_weights.T
+
+
+def _compiled_cutoff(kernels: VoltageKernels, model: LinearSpm, modal: ModalSystem, batch: _Batch, z_k: np.ndarray,
+                     h_s: np.ndarray, current_a: np.ndarray, v0: np.ndarray, v1: np.ndarray) -> np.ndarray:
+    """:func:`_cutoff_in_step` (isothermal) by the fused kernel's compiled root: time into the step (s) at which
+    the voltage, ``v0`` (V) at the step start and ``v1`` at its end, meets the cut-off."""
+    def c(a: npt.ArrayLike) -> np.ndarray:
+        return np.ascontiguousarray(a, dtype=float)
+
+    n = z_k.shape[0]
+    per_set = (np.broadcast_to(v, (n,)) for v in (batch.temperature_k, batch.eps_n, batch.eps_p, batch.height_m))
+    return kernels.cutoff_roots(c(z_k), c(batch.lam), c(batch.drive), c(modal.surface_weights), c(h_s), c(current_a),
+                                c(v0), c(v1), *(c(v) for v in per_set), float(model.lower_cutoff_v),
+                                CUTOFF_TIME_TOL_S)
 
 
 def _cutoff_in_step(model: LinearSpm, modal: ModalSystem, batch: _Batch, z_k: np.ndarray, h_s: np.ndarray,
@@ -540,6 +607,35 @@ def states_at_times(runs: CellRuns, modal: ModalSystem, duration_s: npt.ArrayLik
         z = decay * z_start + phi * runs.extra["drive"][:, None, :] * current[step[inside]][None, :, None]
         out[:, inside] = z @ modal.surface_weights.T
     return out
+
+
+def set_surfaces_at_times(runs: CellRuns, modal: ModalSystem, duration_s: npt.ArrayLike, cell_current_a: npt.ArrayLike,
+                          time_s: npt.ArrayLike, set_index: int) -> np.ndarray:
+    """Surface values (n_times, 2) of one set at ``time_s`` (:func:`states_at_times`; compiled when the run was)."""
+    kernels: VoltageKernels | None = runs.extra.get("kernels")
+    if kernels is None or runs.extra.get("stride") != 1:
+        return states_at_times(runs, modal, duration_s, cell_current_a, time_s)[set_index]
+    current = np.ascontiguousarray(cell_current_a, dtype=float)
+    time_s = np.asarray(time_s, dtype=float)
+    step = np.clip(np.searchsorted(runs.step_start_s, time_s, side="right") - 1, 0, current.size - 1)
+    tau = np.ascontiguousarray(time_s - runs.step_start_s[step])
+    out = np.empty((time_s.size, 2))
+    kernels.surfaces_within(runs.extra["checkpoints"][set_index], np.ascontiguousarray(runs.extra["lam"][set_index]),
+                            np.ascontiguousarray(runs.extra["drive"][set_index]), modal.surface_weights, step, tau,
+                            np.ascontiguousarray(current[step]), out)
+    return out
+
+
+def set_voltage_v(model: LinearSpm, runs: CellRuns, set_index: int, surfaces: np.ndarray, current_a: np.ndarray,
+                  temperature_k: npt.ArrayLike) -> np.ndarray:
+    """Cell voltage (V, (n,)) of one set of ``runs`` at surfaces (n, 2), cell currents (A, (n,)) and cell temperatures
+    (K); by the compiled printed voltage when the run was isothermal and compiled."""
+    batch = runs.extra["batch"]
+    kernels: VoltageKernels | None = runs.extra.get("kernels")
+    if kernels is not None and model.thermal is None:
+        return compiled_voltage(kernels, _take(batch, np.array([set_index])), surfaces[None], current_a[None])[0]
+    return model.cell_voltage_v(surfaces[:, 0], surfaces[:, 1], current_a, temperature_k, batch.eps_n[set_index],
+                                batch.eps_p[set_index], batch.height_m[set_index])
 
 
 def voltages_at_times(model: LinearSpm, runs: CellRuns, modal: ModalSystem, duration_s: npt.ArrayLike,

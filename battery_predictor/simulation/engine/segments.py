@@ -38,7 +38,8 @@ from battery_predictor.simulation.engine.run import (
     CellRuns,
     ParameterSets,
     run_cells,
-    states_at_times,
+    set_surfaces_at_times,
+    set_voltage_v,
     temperatures_at_times,
     thermal_state_at,
 )
@@ -302,6 +303,13 @@ class EnginePack:
                                 r_eq_ohm=r_eq, weak_cell_voltage_v=cell_v[1] if cell_v.size > 1 else None)
         return EngineRunEnd(float(v_pack), False, end_s)
 
+    def warm_up(self, temperature_k: float) -> None:
+        """Compile what :meth:`run_end` and :meth:`run` use (a route end, a sampled run to the cut-off), so that
+        the first answers do not (Numba compiles on first use, seconds, holding the GIL)."""
+        low, high = self.soc_bounds
+        self.run_end(0.5 * (low + high), [(60.0, 1.0), (60.0, 0.5)], temperature_k)
+        self.run(0.5 * (low + high), [(60.0, 0.5), (7200.0, 2.0 * self.capacity_ah)], temperature_k)
+
     def _samples(self, runs: CellRuns, duration_s: np.ndarray, pack_a: np.ndarray, cell_a: np.ndarray,
                  soc_start: float, charge0: float) -> EngineSegmentRun:
         first = int(np.argmin(runs.end_time_s))  # the group that reaches its cut-off first ends the pack's run
@@ -331,14 +339,11 @@ class EnginePack:
         state = self._state_at(runs, duration_s, cell_a, first, end_s, soc_start, charge0)
         if time_s.size == 0:  # at the cut-off as soon as the first segment's current flows
             return EngineSegmentRun(np.zeros(1), np.full(1, np.nan), np.zeros(1), [], True, 0.0, state)
-        batch = runs.extra["batch"]
         v_cells, cell_temperatures = [], []
         for s in range(runs.end_time_s.size):
             surfaces, cell_temperature_k = self._surfaces(runs, s, duration_s, cell_a, time_s, owner)
             cell_temperatures.append(cell_temperature_k)
-            v_cells.append(self.model.cell_voltage_v(surfaces[:, 0], surfaces[:, 1], cell_a[owner],
-                                                     cell_temperature_k, batch.eps_n[s], batch.eps_p[s],
-                                                     batch.height_m[s]))
+            v_cells.append(set_voltage_v(self.model, runs, s, surfaces, cell_a[owner], cell_temperature_k))
         pack_i = np.asarray(pack_a, dtype=float)[owner]
         r_eq = self.r_eq_ohm * self.resistance_factor(cell_temperatures[0])
         v_pack = pack_voltage_v(v_cells[0], pack_i - self.current_offset_a, series=self.params.series,
@@ -391,7 +396,7 @@ class EnginePack:
             temperature_k[at_end] = runs.extra["temperature_k"][set_index, owner[at_end] + 1]
         inside = ~at_end
         if inside.any():
-            surfaces[inside] = states_at_times(runs, self.modal, duration_s, cell_a, time_s[inside])[set_index]
+            surfaces[inside] = set_surfaces_at_times(runs, self.modal, duration_s, cell_a, time_s[inside], set_index)
             if self.model.thermal is not None:
                 temperature_k[inside] = temperatures_at_times(runs, self.modal, time_s[inside])[set_index]
         return surfaces, temperature_k

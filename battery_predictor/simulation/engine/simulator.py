@@ -34,7 +34,7 @@ import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
 from battery_predictor.simulation.base import PackSimResult, PackSimulator, SimulationRequest
-from battery_predictor.simulation.cell_setup import prepared_parameter_values
+from battery_predictor.simulation.cell_setup import is_lumped_thermal, prepared_parameter_values
 from battery_predictor.simulation.engine.modal import ModalSystem, modal_system
 from battery_predictor.simulation.engine.model import (
     C_MAX_N,
@@ -144,6 +144,33 @@ def _series_resistance_ohm(params: PackParams, temperature_k: npt.ArrayLike) -> 
     if "temperature" not in params.extensions:
         return np.asarray(r_eq, dtype=float)
     return r_eq * series_resistance_factor(params, temperature_k)
+
+
+#: :func:`_diffusivity_reason` by (params fingerprint, extensions, options, temperature).
+_DIFFUSIVITY_REASONS: dict[tuple, str | None] = {}
+
+
+def _diffusivity_reason(params: PackParams, temperature_k: float) -> str | None:
+    """Why the params' particle diffusivities keep the engine out (they depend on the stoichiometry at
+    ``temperature_k`` (K), or anywhere in the thermal table's range for a lumped thermal cell), else None.
+
+    Cached: the check builds PyBaMM's parameter values (~10 ms) and evaluates the diffusivity functions.
+    """
+    key = (params.fingerprint(), tuple(params.extensions), repr(sorted(params.options.items())), float(temperature_k))
+    if key not in _DIFFUSIVITY_REASONS:
+        if len(_DIFFUSIVITY_REASONS) >= 256:
+            _DIFFUSIVITY_REASONS.clear()
+        pv = prepared_parameter_values(params)
+        try:
+            if is_lumped_thermal(params):
+                diffusivity_temperature(pv, DIFFUSIVITY_KEYS, float(temperature_k))
+            else:
+                for pybamm_key in DIFFUSIVITY_KEYS:
+                    diffusivity_m2_s(pv, pybamm_key, float(temperature_k))
+            _DIFFUSIVITY_REASONS[key] = None
+        except SimulationError as exc:
+            _DIFFUSIVITY_REASONS[key] = str(exc)
+    return _DIFFUSIVITY_REASONS[key]
 
 
 class EngineSimulator:
@@ -267,7 +294,7 @@ class EngineSimulator:
         outside = sorted(set(params.extensions) - set(ENGINE_EXTENSIONS))
         if outside:
             return f"the engine does not cover the extensions {outside}"
-        return None
+        return _diffusivity_reason(params, EngineSimulator._temperature_k(params, request))
 
     # ---------------------------------------------------------------- helpers
     def _fall_back(self, params: PackParams, request: SimulationRequest, reason: str) -> PackSimResult:
