@@ -7,7 +7,14 @@ import sys
 import warnings
 from pathlib import Path
 
-from battery_predictor.cli.common import check_output_file, check_plot_file, data_options, load_data, print_json
+from battery_predictor.cli.common import (
+    check_output_file,
+    check_plot_file,
+    data_options,
+    engine_fallback,
+    load_data,
+    print_json,
+)
 from battery_predictor.ocp import ocp_origin
 
 
@@ -93,7 +100,7 @@ def run_identify(args) -> int:
                     "tpe_evaluations": result.tpe_evaluations, "seconds": result.seconds,
                     "coordinates": result.coordinates, "params": best.values[0],
                     "identifiability": report.to_dict(), "ocp": ocp_origin(params), "thermal": thermal,
-                    "out": str(out), "plot": str(plot_path)})
+                    "out": str(out), "plot": str(plot_path), "engine_fallback": engine_fallback(best.results)})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
           f"({result.evaluations} evaluations, {result.seconds:.0f} s; {ocp_origin(params)}; {thermal} cell)")
@@ -102,5 +109,8 @@ def run_identify(args) -> int:
               f"[{c.low:.4g}, {c.high:.4g}]{' log' if c.log else ''}")
     for line in report.summary_lines():
         print(line)
+    fallback = engine_fallback(best.results)
+    if fallback:
+        print(f"engine fallback: {fallback}")
     print(f"wrote {out} and {plot_path}")
     return 0
