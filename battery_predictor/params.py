@@ -249,20 +249,17 @@ class PackParams:
     def with_values(self, updates: Mapping[str, float], **changes: Any) -> PackParams:
         """Return a copy with fit-parameter values replaced.
 
-        PyBaMM keys go to ``fitted``; the extensions' own keys (``simulation.extensions.EXTENSION_DEFAULTS``)
-        and keys already in ``cell.extra`` go to ``extra``, which :attr:`cell_values` applies last (a value
-        written to ``fitted`` under a key of ``extra`` would have no effect).
+        PyBaMM keys go to ``fitted``; keys already in ``cell.extra`` (the extensions' values) stay in
+        ``extra``, which :attr:`cell_values` applies last (a value written to ``fitted`` under such a key
+        would have no effect).
         """
-        from battery_predictor.simulation.extensions import EXTENSION_DEFAULTS
-
-        own = {k for defaults in EXTENSION_DEFAULTS.values() for k in defaults}
         fitted = dict(self.fitted)
         extra = dict(self.extra)
         interconnect = dict(self.interconnect)
         for key, val in updates.items():
             if key in INTERCONNECT_KEYS:
                 interconnect[key] = float(val)
-            elif key in extra or key in own:
+            elif key in extra:
                 extra[key] = float(val)
                 fitted.pop(key, None)
             else:

@@ -53,7 +53,9 @@ def run_identify(args) -> int:
 
     check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
     check_plot_file(args.plot or Path(args.out).with_suffix(".png"))
-    params = with_thermal(load_params(args.params), getattr(args, "thermal", "params"))
+    from battery_predictor.simulation.extensions import with_fitted_extension_keys
+
+    params = with_fitted_extension_keys(with_thermal(load_params(args.params), getattr(args, "thermal", "params")))
     thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
     with warnings.catch_warnings(record=True) as caught:

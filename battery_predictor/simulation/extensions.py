@@ -241,6 +241,21 @@ def extension_value(params: PackParams, key: str) -> float:
     raise KeyError(key)
 
 
+#: Extension keys a fit may search (``fitting.identifiable``), by extension.
+FITTED_EXTENSION_KEYS: dict[str, tuple[str, ...]] = {"hysteresis": (HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL)}
+
+
+def with_fitted_extension_keys(params: PackParams) -> PackParams:
+    """``params`` with the keys a fit searches of its active extensions in ``cell.extra`` (their defaults when absent).
+
+    :meth:`~battery_predictor.params.PackParams.with_values` then writes fitted values of these keys to
+    ``cell.extra``, where a params file keeps the extensions' values (``cell.fitted`` takes PyBaMM keys only).
+    """
+    missing = {key: extension_value(params, key) for ext in params.extensions
+               for key in FITTED_EXTENSION_KEYS.get(ext, ()) if key not in params.extra}
+    return replace(params, extra={**params.extra, **missing}) if missing else params
+
+
 def current_offset_a(params: PackParams) -> float:
     """Current sensor offset in A (pack level) when ``current_offset`` is active, else 0.
 

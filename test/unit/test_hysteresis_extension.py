@@ -133,6 +133,13 @@ def test_fit_coordinates_and_values_of_the_extension(k2_hysteresis):
     assert fitted.extra[ext.HYS_HALF_WIDTH] == 0.011 and fitted.extra[ext.HYS_DECAY] == 77.0
     assert ext.HYS_HALF_WIDTH not in fitted.fitted
     assert fitted.cell_values[ext.HYS_HALF_WIDTH] == 0.011
+    # params that activate the extension without its keys get them (defaults) in cell.extra before a fit
+    bare = replace(k2_hysteresis, extra={k: v for k, v in k2_hysteresis.extra.items() if "hysteresis" not in k})
+    ready = ext.with_fitted_extension_keys(bare)
+    assert ready.extra[ext.HYS_DECAY] == ext.EXTENSION_DEFAULTS["hysteresis"][ext.HYS_DECAY]
+    assert ready.with_values(values).extra[ext.HYS_HALF_WIDTH] == 0.011
+    plain = replace(bare, extensions=())
+    assert ext.with_fitted_extension_keys(plain) is plain
 
 
 def test_rate_is_pybamms_axen_rate_per_unit_charge(k2_hysteresis):
