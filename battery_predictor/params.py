@@ -250,15 +250,24 @@ class PackParams:
         return self.base_parameter_set, repr(sorted(self.cell_values.items()))
 
     def with_values(self, updates: Mapping[str, float], **changes: Any) -> PackParams:
-        """Return a copy with fit-parameter values replaced (PyBaMM keys go to ``fitted``)."""
+        """Return a copy with fit-parameter values replaced.
+
+        PyBaMM keys go to ``fitted``; keys already in ``cell.extra`` (the extensions' values) stay in
+        ``extra``, which :attr:`cell_values` applies last (a value written to ``fitted`` under such a key
+        would have no effect).
+        """
         fitted = dict(self.fitted)
+        extra = dict(self.extra)
         interconnect = dict(self.interconnect)
         for key, val in updates.items():
             if key in INTERCONNECT_KEYS:
                 interconnect[key] = float(val)
+            elif key in extra:
+                extra[key] = float(val)
+                fitted.pop(key, None)
             else:
                 fitted[key] = float(val)
-        return replace(self, fitted=fitted, interconnect=interconnect, **changes)
+        return replace(self, fitted=fitted, extra=extra, interconnect=interconnect, **changes)
 
     # ------------------------------------------------------------------ output
     def to_dict(self) -> dict[str, Any]:

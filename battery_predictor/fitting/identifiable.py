@@ -16,8 +16,16 @@ negative_diffusivity_m2_s  log    optional transport group (particle diffusivity
 positive_diffusivity_m2_s  log    optional transport group
 negative_kinetic_scale     log    optional kinetic group: reaction area (so exchange current) factor
 positive_kinetic_scale     log    optional kinetic group
+hysteresis_half_width_v    lin    with the ``hysteresis`` extension: its half-width ``M`` (V), searched in
+                                  :data:`HYSTERESIS_HALF_WIDTH_RANGE_V`
+hysteresis_decay_rate      log    with the ``hysteresis`` extension: its rate ``K`` (per unit charge of the
+                                  positive electrode), searched in :data:`HYSTERESIS_DECAY_RANGE`
 initial_ocv_v:<k>          lin    open-circuit cell voltage at the start of recording ``k`` (state)
 ========================== ====== ===================================================================
+
+The two hysteresis coordinates are searched whenever the params activate the extension (its initial
+state, ``Initial hysteresis state in positive electrode [-]``, stays as the params say: where the
+recordings start after a full charge, +1).
 
 The first recording's positive stoichiometry follows from its initial OCV (``U_p(y) - U_n(x) =
 OCV``); together they fix the cyclable lithium ``Q_Li = x Q_n + y Q_p``, which is shared: every
@@ -88,6 +96,15 @@ _ELECTRODES = {"negative": "Negative", "positive": "Positive"}
 _DIFFUSIVITY_KEYS = {"negative_diffusivity_m2_s": "Negative particle diffusivity [m2.s-1]",
                      "positive_diffusivity_m2_s": "Positive particle diffusivity [m2.s-1]"}
 _KINETIC_ELECTRODES = {"negative_kinetic_scale": "Negative", "positive_kinetic_scale": "Positive"}
+#: Search range of the hysteresis half-width (V per cell; linear).
+HYSTERESIS_HALF_WIDTH_RANGE_V = (0.0, 0.06)
+#: Search range of the hysteresis rate ``K`` (dimensionless, log scale): ``K = 100`` moves the state by
+#: ``1 - exp(-1)`` of its way to a branch while 1 % of the positive electrode's charge flows.
+HYSTERESIS_DECAY_RANGE = (1.0, 1.0e4)
+#: Hysteresis coordinates -> extension keys (``simulation.extensions``).
+_HYSTERESIS_KEYS = {"hysteresis_half_width_v": "Positive electrode OCP hysteresis half-width [V]",
+                    "hysteresis_decay_rate": "Positive particle hysteresis decay rate [-]"}
+HYSTERESIS_COORDINATES = tuple(_HYSTERESIS_KEYS)
 
 
 @dataclass(frozen=True)
@@ -186,6 +203,10 @@ def shipped_coordinates(params: PackParams) -> dict[str, float]:
         val = pv[key]
         if isinstance(val, (int, float)):
             out[name] = float(val)
+    if "hysteresis" in params.extensions:
+        from battery_predictor.simulation.extensions import extension_value
+
+        out.update({name: extension_value(params, key) for name, key in _HYSTERESIS_KEYS.items()})
     return out
 
 
@@ -259,6 +280,11 @@ def default_space(params: PackParams, recordings: Sequence[Recording] = (),
                               f"{params.base_parameter_set}; it cannot be searched as a scalar")
         lo, hi = (f * shipped[name] for f in DIFFUSIVITY_FACTORS)
         space.append(Coordinate(name, shipped[name], lo, hi, True))
+    if "hysteresis" in params.extensions:
+        space.append(_widened("hysteresis_half_width_v", shipped["hysteresis_half_width_v"],
+                              *HYSTERESIS_HALF_WIDTH_RANGE_V, log=False))
+        space.append(_widened("hysteresis_decay_rate", shipped["hysteresis_decay_rate"], *HYSTERESIS_DECAY_RANGE,
+                              log=True))
     space.extend(initial_ocv_coordinates(params, recordings))
     return space
 
@@ -432,6 +458,9 @@ def pybamm_values(params: PackParams, coordinates: Mapping[str, float], n_record
         if name in coordinates:
             shared[key] = c[name]
     shared.update(kinetic_values(params, coordinates))
+    for name, key in _HYSTERESIS_KEYS.items():
+        if name in coordinates:
+            shared[key] = c[name]
     x_0, y_0 = _first_state(params, basis, c, shipped, "initial_ocv_v:0" in c)
     q_li_ah = x_0 * c["negative_capacity_ah"] + y_0 * c["positive_capacity_ah"]
     out = []
@@ -485,6 +514,6 @@ def fitted_parameter_names(values: Mapping[str, float]) -> list[str]:
 
 
 __all__ = [
-    "CORE_COORDINATES", "OPTIONAL_COORDINATES", "Coordinate", "ElectrodeBasis", "default_space", "electrode_basis",
+    "CORE_COORDINATES", "HYSTERESIS_COORDINATES", "OPTIONAL_COORDINATES", "Coordinate", "ElectrodeBasis", "default_space", "electrode_basis",
     "initial_stoichiometries", "kinetic_values", "ocp_curves", "pybamm_values", "shipped_coordinates", "fitted_parameter_names",
 ]

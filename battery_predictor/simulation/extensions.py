@@ -51,7 +51,13 @@ extension                  what it changes
                            delithiation OCP = OCP -/+ ``Positive electrode OCP hysteresis half-width
                            [V]``, decay rate ``Positive particle hysteresis decay rate [-]`` and
                            initial state ``Initial hysteresis state in positive electrode [-]``
-                           (-1 = discharge branch, +1 = charge branch).
+                           (-1 = discharge branch, +1 = charge branch). In the SPM the positive
+                           particles' interfacial current is uniform, so PyBaMM's hysteresis ODE is
+                           ``dh/dt = K |I| / Q_p (s - h)`` with ``s = -sign(I)`` and ``Q_p`` the
+                           positive electrode's theoretical charge (Plett's one-state hysteresis), and
+                           the cell voltage moves by ``half-width * h``: the engine steps it exactly
+                           on piecewise-constant currents (:func:`hysteresis_states`,
+                           :mod:`battery_predictor.simulation.engine.hysteresis`).
 =========================  =======================================================================
 """
 
@@ -237,6 +243,21 @@ def extension_value(params: PackParams, key: str) -> float:
         if key in defaults:
             return float(defaults[key])
     raise KeyError(key)
+
+
+#: Extension keys a fit may search (``fitting.identifiable``), by extension.
+FITTED_EXTENSION_KEYS: dict[str, tuple[str, ...]] = {"hysteresis": (HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL)}
+
+
+def with_fitted_extension_keys(params: PackParams) -> PackParams:
+    """``params`` with the keys a fit searches of its active extensions in ``cell.extra`` (their defaults when absent).
+
+    :meth:`~battery_predictor.params.PackParams.with_values` then writes fitted values of these keys to
+    ``cell.extra``, where a params file keeps the extensions' values (``cell.fitted`` takes PyBaMM keys only).
+    """
+    missing = {key: extension_value(params, key) for ext in params.extensions
+               for key in FITTED_EXTENSION_KEYS.get(ext, ()) if key not in params.extra}
+    return replace(params, extra={**params.extra, **missing}) if missing else params
 
 
 def current_offset_a(params: PackParams) -> float:
@@ -441,3 +462,84 @@ def apply_extension_parameter_values(params: PackParams, pv: Any) -> Any:
         pv.update({k: pv[HYS_DECAY] for k in PYBAMM_HYS_DECAY_KEYS}, check_already_exists=False)
         pv.update({PYBAMM_HYS_INITIAL_KEY: pv[HYS_INITIAL]}, check_already_exists=False)
     return pv
+
+
+#: Faraday constant in C/mol (PyBaMM's value).
+FARADAY_C_MOL = 96485.33212
+
+
+def hysteresis_positive_charge_c(pv: Any) -> float:
+    """The positive electrode's theoretical charge ``Q_p = F c_max eps_p L_p A n`` (C) of parameter values ``pv``.
+
+    ``A`` is the electrode area (height x width) and ``n`` the number of electrodes connected in parallel:
+    PyBaMM's Axen rate ``|i_vol| K / (F c_max eps_p)`` is ``K |I| / Q_p`` in the SPM, whose volumetric
+    interfacial current ``i_vol = I / (n A L_p)`` is uniform.
+    """
+    n_electrodes = float(pv["Number of electrodes connected in parallel to make a cell"])
+    area_m2 = float(pv["Electrode height [m]"]) * float(pv["Electrode width [m]"])
+    return (FARADAY_C_MOL * float(pv["Maximum concentration in positive electrode [mol.m-3]"])
+            * float(pv["Positive electrode active material volume fraction"])
+            * float(pv["Positive electrode thickness [m]"]) * area_m2 * n_electrodes)
+
+
+def hysteresis_rate_per_c(params: PackParams, pv: Any) -> float:
+    """Hysteresis rate per unit charge ``K / Q_p`` (1/C) of ``params`` (:data:`HYS_DECAY`, parameter values ``pv``)."""
+    return extension_value(params, HYS_DECAY) / hysteresis_positive_charge_c(pv)
+
+
+def hysteresis_step(h: ArrayLike, current_a: ArrayLike, duration_s: ArrayLike, rate_per_c: ArrayLike) -> np.ndarray:
+    """The hysteresis state after a constant current, exactly: ``s + (h - s) exp(-rate |I| dt)``.
+
+    This is the solution of ``dh/dt = rate |I| (s - h)``, ``s = -sign(I)`` (a discharge, ``I > 0``, moves
+    ``h`` to -1, the lithiation branch of the positive electrode; a charge to +1; at rest ``h`` stays).
+
+    Parameters
+    ----------
+    h : float or numpy.ndarray
+        Hysteresis state at the start (-1..1, dimensionless).
+    current_a : float or numpy.ndarray
+        Cell current in A (positive = discharge).
+    duration_s : float or numpy.ndarray
+        Time at that current in s (>= 0).
+    rate_per_c : float or numpy.ndarray
+        ``K / Q_p`` in 1/C (:func:`hysteresis_rate_per_c`).
+
+    Returns
+    -------
+    numpy.ndarray
+        The state at the end (stays within [-1, 1] when it starts there).
+    """
+    current = np.asarray(current_a, dtype=float)
+    target = -np.sign(current)
+    decay = np.exp(-np.asarray(rate_per_c, dtype=float) * np.abs(current) * np.asarray(duration_s, dtype=float))
+    h = np.asarray(h, dtype=float)
+    return np.where(current == 0.0, h, target + (h - target) * decay)
+
+
+def hysteresis_states(h0: float, duration_s: ArrayLike, current_a: ArrayLike, rate_per_c: float) -> np.ndarray:
+    """The hysteresis state at every boundary of piecewise-constant current steps (exact).
+
+    Parameters
+    ----------
+    h0 : float
+        State at the start (-1..1).
+    duration_s, current_a : array_like
+        Step lengths (s) and cell currents (A, positive = discharge), shape (n_steps,).
+    rate_per_c : float
+        ``K / Q_p`` in 1/C.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (n_steps + 1,): the state at the start of each step and at the end of the last.
+    """
+    current = np.asarray(current_a, dtype=float)
+    target = (-np.sign(current)).tolist()
+    decay = np.exp(-float(rate_per_c) * np.abs(current) * np.asarray(duration_s, dtype=float)).tolist()
+    out = [float(h0)]
+    h = float(h0)
+    for s, a in zip(target, decay):  # h_{k+1} = s_k + (h_k - s_k) a_k (a_k = 1 at rest)
+        h = s + (h - s) * a
+        out.append(h)
+    return np.asarray(out)
+

@@ -19,6 +19,12 @@ extensions outside :data:`ENGINE_EXTENSIONS`, model options or states that the v
 depends on beyond the particle surfaces, concentration-dependent diffusivities, per-cell values)
 is simulated by the fallback simulator (the fast one by default); the result says so in
 ``extra["engine_fallback"]`` and a warning is logged, so a fallback is never silent.
+
+The extension ``hysteresis`` (PyBaMM's one-state Axen OCP hysteresis) runs on isothermal cells: the cell
+is extracted without the option and the hysteresis voltage is stepped exactly beside it
+(:mod:`~battery_predictor.simulation.engine.hysteresis`); the result carries ``extra["hysteresis_state"]``
+at the report times. With a lumped thermal cell, or in :meth:`EngineSimulator.simulate_batch`, it is
+not covered (fallback, or an error for the batch).
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from __future__ import annotations
 import logging
 import time
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -64,7 +70,14 @@ from battery_predictor.simulation.engine.thermal import (
     diffusivity_temperature,
     heat_capacity,
 )
-from battery_predictor.simulation.extensions import series_resistance_factor
+from battery_predictor.simulation.extensions import (
+    HYS_DECAY,
+    HYS_HALF_WIDTH,
+    HYS_INITIAL,
+    extension_value,
+    hysteresis_rate_per_c,
+    series_resistance_factor,
+)
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 if TYPE_CHECKING:
@@ -126,6 +139,8 @@ _SIGNATURE_K = (233.15, 263.15, 298.15, 333.15, 373.15)
 #: The maximum concentrations, scalable where :func:`c_max_scaling_holds`.
 C_MAX_KEYS = {C_MAX_N: "c_max_n", C_MAX_P: "c_max_p"}
 _STATE_KEYS = frozenset({C_N0, C_P0})
+#: Values of the extensions run beside the cell (the extraction does not depend on them).
+_BESIDE_KEYS = frozenset({HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL})
 #: Extensions whose whole effect is inside PyBaMM's cell model (model options, parameter values) or
 #: outside the simulator (the current offset is applied where a recording becomes a load); the
 #: extraction checks that the model still splits into linear particles and a voltage function.
@@ -134,6 +149,14 @@ CELL_MODEL_EXTENSIONS = ("capacity_fade", "current_offset", "hysteresis", "resis
 #: exchange currents are inside PyBaMM's model; its series-resistance factor is applied to ``R_eq``
 #: at the cell temperature, :func:`_series_resistance_ohm`).
 ENGINE_EXTENSIONS = CELL_MODEL_EXTENSIONS + ("temperature",)
+#: Extensions the simulator runs beside the extracted cell (the cell is extracted without them).
+VOLTAGE_TERM_EXTENSIONS = ("hysteresis",)
+
+
+def engine_cell_params(params: PackParams) -> PackParams:
+    """``params`` without the extensions the engine steps beside the cell (:data:`VOLTAGE_TERM_EXTENSIONS`)."""
+    kept = tuple(e for e in params.extensions if e not in VOLTAGE_TERM_EXTENSIONS)
+    return params if kept == tuple(params.extensions) else replace(params, extensions=kept)
 
 
 def _series_resistance_ohm(params: PackParams, temperature_k: npt.ArrayLike) -> np.ndarray:
@@ -241,6 +264,8 @@ class EngineSimulator:
         PackBatchResult
         """
         reason = self.unsupported_reason(params, request)
+        if reason is None and "hysteresis" in params.extensions:
+            reason = "the batch does not run the hysteresis extension (simulate each set)"
         if reason is not None:
             raise SimulationError(f"engine: {reason}")
         model, modal, base = self._model(params, self._temperature_k(params, request))
@@ -294,6 +319,8 @@ class EngineSimulator:
         outside = sorted(set(params.extensions) - set(ENGINE_EXTENSIONS))
         if outside:
             return f"the engine does not cover the extensions {outside}"
+        if "hysteresis" in params.extensions and is_lumped_thermal(params):
+            return "the engine's hysteresis extension runs on isothermal cells, not a lumped thermal one"
         return _diffusivity_reason(params, EngineSimulator._temperature_k(params, request))
 
     # ---------------------------------------------------------------- helpers
@@ -307,6 +334,7 @@ class EngineSimulator:
 
     def _scalable_keys(self, params: PackParams) -> dict[str, str]:
         """:data:`SCALABLE_KEYS`, plus the maximum concentrations where this model structure obeys their rule."""
+        params = engine_cell_params(params)
         structure = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions)
         if structure not in self._c_max_rule:
             self._c_max_rule[structure] = c_max_scaling_holds(params)
@@ -335,9 +363,11 @@ class EngineSimulator:
         Diffusivities that are functions of the temperature are taken at ``temperature_k`` (the
         isothermal cell's), as a factor on the extraction's.
         """
+        params = engine_cell_params(params)  # the hysteresis runs beside the extracted cell
         values = params.cell_values
         scalable = self._scalable_keys(params)
-        fixed = tuple(sorted((k, repr(v)) for k, v in values.items() if k not in scalable and k not in _STATE_KEYS))
+        fixed = tuple(sorted((k, repr(v)) for k, v in values.items()
+                             if k not in scalable and k not in _STATE_KEYS and k not in _BESIDE_KEYS))
         key = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions, fixed)
         if key in self._cache:
             self._cache.move_to_end(key)
@@ -420,6 +450,8 @@ class EngineSimulator:
         cell_current_a = load.current_a / params.parallel
         t_engine = time.perf_counter()
         t_out = request.output_times()
+        if "hysteresis" in params.extensions:
+            return self._simulate_hysteresis(params, request, model, modal, sets, (c_n0, c_p0), tic)
         step = np.clip(np.searchsorted(load.start_s, t_out, side="right") - 1, 0, load.start_s.size - 1)
         on_starts = bool(np.all(t_out == load.start_s[step]))  # then the run's step-start voltages are the report
         runs = run_cells(model, modal, duration_s, cell_current_a, c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
@@ -454,6 +486,43 @@ class EngineSimulator:
             extra={"r_eq_ohm": r_eq, "engine_seconds": engine_s, "engine_backend": runs.extra["backend"],
                    "thermal": "isothermal" if model.thermal is None else "lumped",
                    **({} if cell_temperature_k is None else {"cell_temperature_k": cell_temperature_k})},
+        )
+
+
+    def _simulate_hysteresis(self, params: PackParams, request: SimulationRequest, model: LinearSpm, modal: ModalSystem,
+                             sets: ParameterSets, c0: tuple[float, float], tic: float) -> PackSimResult:
+        """:meth:`_simulate` with the ``hysteresis`` extension's voltage (isothermal cells)."""
+        from battery_predictor.simulation.engine.hysteresis import Hysteresis, run_cell
+
+        temperature_k = float(request.ambient_temperature_k or params.ambient_temperature_k)
+        load = request.load
+        duration_s = np.diff(load.edges_s())
+        cell_current_a = load.current_a / params.parallel
+        pv = self._parameter_values(params)
+        term = Hysteresis(half_width_v=extension_value(params, HYS_HALF_WIDTH),
+                          rate_per_c=hysteresis_rate_per_c(params, pv),
+                          initial_state=extension_value(params, HYS_INITIAL))
+        t_engine = time.perf_counter()
+        run = run_cell(model, modal, duration_s, cell_current_a, c_n0_mol_m3=c0[0], c_p0_mol_m3=c0[1],
+                       temperature_k=temperature_k, sets=sets, backend=self.backend, hysteresis=term,
+                       time_s=request.output_times())
+        engine_s = time.perf_counter() - t_engine
+        i_pack = load.current_at(run.time_s)
+        r_eq = _series_resistance_ohm(params, temperature_k)
+        v_pack = pack_voltage_v(run.cell_voltage_v, i_pack, series=params.series, r_eq_ohm=r_eq)
+        if not np.all(np.isfinite(v_pack)):
+            raise SimulationError("engine simulation produced non-finite voltages")
+        return PackSimResult(
+            time_s=run.time_s,
+            pack_voltage_v=v_pack,
+            pack_current_a=i_pack,
+            min_cell_voltage_v=run.cell_voltage_v,
+            termination="cell_cutoff" if run.reached_cutoff else "end_of_load",
+            end_time_s=run.end_time_s,
+            seconds=time.perf_counter() - tic,
+            extra={"r_eq_ohm": r_eq, "engine_seconds": engine_s, "engine_backend": run.backend,
+                   "thermal": "isothermal", "hysteresis_state": run.hysteresis_state,
+                   "final_hysteresis_state": run.final_state},
         )
 
 
