@@ -21,7 +21,7 @@ extension                  what it changes
                            series resistance ``R_eq`` the reference fit found (``Series resistance
                            activation energy [J.mol-1]``; :func:`series_resistance_factor`, applied by
                            the fast simulator and the predictor's runner); a stoichiometry window of
-                           both electrodes that narrows below the anchor temperature (unchanged above it)
+                           both electrodes that narrows below the anchor temperature and widens above it
                            (:data:`COLD_WINDOW`, :func:`cold_window_scale`: an accessible capacity
                            that follows the temperature at any rate). The cell is isothermal at
                            the given (measured) temperature, as the predictor runs at the last
@@ -350,22 +350,21 @@ def _arrhenius_exchange_current(j0: Callable[..., pybamm.Symbol], t_ref: float) 
 
 
 def cold_window_scale(loss_per_k: Any, temperature_k: Any, anchor_k: Any = COLD_REFERENCE_K) -> Any:
-    """How much faster the electrodes' stoichiometries advance in the cold: ``1 / (1 - loss max(T_anchor - T, 0))`` (-).
+    """How much faster the electrodes' stoichiometries advance in the cold: ``1 / (1 - loss (T_anchor - T))`` (-).
 
     With the window loss of :data:`COLD_WINDOW` each electrode's open-circuit potential is evaluated at
     its charged-end stoichiometry plus ``scale`` times the distance from it (:func:`_cold_window_ocp`):
     both windows, and with them the cell's open-circuit voltage over the charge drawn, are compressed
     by ``1 / scale`` - an equilibrium loss of accessible capacity, present at any rate, that comes back
-    as the cell warms. 1 at and above the anchor temperature ``anchor_k`` (K, :data:`ANCHOR_TEMPERATURE`,
-    default 298.15 K): a warmer cell does not gain capacity beyond its identified window (the LG M50's
-    C/10 capacity is the same at 25 and 45 degC within 0.2 %, docs/findings.md); numbers or PyBaMM symbols.
+    as the cell warms (and a wider window above the anchor). 1 at the anchor temperature ``anchor_k``
+    (K, :data:`ANCHOR_TEMPERATURE`, default 298.15 K); numbers or PyBaMM symbols.
     """
     import pybamm
 
     if any(isinstance(x, pybamm.Symbol) for x in (loss_per_k, temperature_k, anchor_k)):
-        below = pybamm.maximum(anchor_k - temperature_k, 0.0)
+        below = anchor_k - temperature_k
         return 1.0 / pybamm.maximum(1.0 - loss_per_k * below, 0.2)
-    below = np.maximum(float(anchor_k) - np.asarray(temperature_k, dtype=float), 0.0)
+    below = float(anchor_k) - np.asarray(temperature_k, dtype=float)
     return 1.0 / np.maximum(1.0 - float(loss_per_k) * below, 0.2)
 
 

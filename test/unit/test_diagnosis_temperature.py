@@ -90,10 +90,10 @@ def test_arrhenius_cell_resistance_adds_only_its_excess_over_the_reference_tempe
     assert float(ext.series_resistance_factor(params, 273.15)) > 1.0
 
 
-def test_cold_window_scale_narrows_below_the_reference_temperature_and_stays_at_one_above():
+def test_cold_window_scale_narrows_below_the_reference_temperature_and_widens_above():
     assert float(ext.cold_window_scale(0.004, ext.COLD_REFERENCE_K)) == pytest.approx(1.0)
     assert float(ext.cold_window_scale(0.004, 273.15)) == pytest.approx(1.0 / (1.0 - 0.004 * 25.0))
-    assert float(ext.cold_window_scale(0.004, 318.15)) == pytest.approx(1.0)
+    assert float(ext.cold_window_scale(0.004, 318.15)) == pytest.approx(1.0 / (1.0 + 0.004 * 20.0))
     assert float(ext.cold_window_scale(0.0, 253.15)) == pytest.approx(1.0)
 
 
