@@ -16,12 +16,14 @@ formula; :func:`pybamm_ocp` and :func:`evaluate` call it with PyBaMM's or NumPy'
 
 from __future__ import annotations
 
+import functools
+import inspect
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from battery_predictor.errors import ParamsError
+from battery_predictor.errors import ParamsError, SimulationError
 
 if TYPE_CHECKING:
     import pybamm
@@ -36,6 +38,9 @@ CONSTANT_KEY = f"{PREFIX} constant [V]"
 SLOPE_KEY = f"{PREFIX} slope [V]"
 #: Most terms a series may have (the YAML is checked against it).
 MAX_TERMS = 64
+#: Stoichiometry grid on which :func:`ocp_curves` tabulates the OCPs.
+STO_GRID = np.linspace(1e-4, 1.0 - 1e-4, 2001)
+_ELECTRODE_NAMES = {"negative": "Negative", "positive": "Positive"}
 
 
 def series_keys(n_terms: int) -> list[str]:
@@ -175,3 +180,72 @@ def values_to_section(values: Mapping[str, float], source: str = "") -> dict[str
     if source:
         pos["source"] = source
     return {"positive": pos}
+
+
+# ----------------------------------------------------------------------------- tables and the balance
+@functools.lru_cache(maxsize=32)
+def _ocp_table(base_parameter_set: str, cell_values: tuple, electrode: str, temperature_k: float) -> np.ndarray:
+    import pybamm
+
+    pv = cell_parameter_values(base_parameter_set, dict(cell_values))
+    key = f"{_ELECTRODE_NAMES[electrode]} electrode OCP [V]"
+    fn = pv[key]
+    if not callable(fn):
+        raise ParamsError(f"{key} of {base_parameter_set} is not a function of stoichiometry")
+    n_args = len(inspect.signature(fn).parameters)
+    sto = pybamm.Vector(STO_GRID)
+    args = {"Stoichiometry": sto} if n_args == 1 else {"Stoichiometry": sto, "Temperature [K]": pybamm.Scalar(
+        temperature_k)}
+    sym = pybamm.FunctionParameter(key, args)
+    return np.asarray(pv.process_symbol(sym).evaluate(), dtype=float).ravel()
+
+
+def sto_grid() -> np.ndarray:
+    """The stoichiometry grid (dimensionless) on which :func:`ocp_curves` tabulates the OCPs."""
+    return STO_GRID.copy()
+
+
+def ocp_curves(params: PackParams, temperature_k: float = 298.15) -> tuple[np.ndarray, np.ndarray]:
+    """Negative and positive OCP (V) of ``params`` on the stoichiometry grid :data:`STO_GRID` (cached)."""
+    key = tuple(sorted((k, v) for k, v in params.cell_values.items() if "OCP" in k))
+    return (_ocp_table(params.base_parameter_set, key, "negative", temperature_k),
+            _ocp_table(params.base_parameter_set, key, "positive", temperature_k))
+
+
+def initial_stoichiometries(params: PackParams, q_n_ah: float, q_p_ah: float, q_li_ah: float,
+                            ocv_v: float, temperature_k: float = 298.15) -> tuple[float, float]:
+    """Stoichiometries ``(x, y)`` with ``U_p(y) - U_n(x) = ocv_v`` and ``x Q_n + y Q_p = Q_Li``.
+
+    Parameters
+    ----------
+    params : PackParams
+        Whose OCPs (base set and measured series) are used.
+    q_n_ah, q_p_ah : float
+        Each electrode's capacity over its full stoichiometry range, Ah (any common scale).
+    q_li_ah : float
+        Cyclable lithium, Ah (same scale).
+    ocv_v : float
+        Cell open-circuit voltage, V.
+    temperature_k : float
+        Temperature at which the OCPs are evaluated, K.
+
+    Raises
+    ------
+    SimulationError
+        When no such pair lies inside (0, 1) x (0, 1).
+    """
+    u_n, u_p = ocp_curves(params, temperature_k)
+    x_lo = max(STO_GRID[0], (q_li_ah - STO_GRID[-1] * q_p_ah) / q_n_ah)
+    x_hi = min(STO_GRID[-1], (q_li_ah - STO_GRID[0] * q_p_ah) / q_n_ah)
+    if not x_lo < x_hi:
+        raise SimulationError(f"lithium inventory {q_li_ah:.3g} Ah does not fit electrodes of {q_n_ah:.3g} and "
+                              f"{q_p_ah:.3g} Ah")
+    x = np.linspace(x_lo, x_hi, 801)
+    y = (q_li_ah - x * q_n_ah) / q_p_ah
+    ocv = np.interp(y, STO_GRID, u_p) - np.interp(x, STO_GRID, u_n)
+    order = np.argsort(ocv)
+    if not ocv[order[0]] <= ocv_v <= ocv[order[-1]]:
+        raise SimulationError(f"initial OCV {ocv_v:.3f} V is outside the cell's range "
+                              f"{ocv[order[0]]:.3f}-{ocv[order[-1]]:.3f} V for these capacities")
+    x0 = float(np.interp(ocv_v, ocv[order], x[order]))
+    return x0, (q_li_ah - x0 * q_n_ah) / q_p_ah

@@ -102,10 +102,11 @@ def _run_tpe(args: argparse.Namespace) -> int:
     from battery_predictor.params import load_params
     from battery_predictor.plots import plot_voltage_fit
     from battery_predictor.simulation.cell_setup import is_lumped_thermal, with_thermal
+    from battery_predictor.simulation.extensions import with_cold_window_anchors
 
     check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
     check_plot_file(args.plot or Path(args.out).with_suffix(".png"))
-    params = with_thermal(load_params(args.params), args.thermal)
+    params = with_cold_window_anchors(with_thermal(load_params(args.params), args.thermal))
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
     out = Path(args.out)
     storage = args.storage or f"sqlite:///{out.with_suffix('.optuna.db').resolve()}"

@@ -60,11 +60,12 @@ def run_identify(args: argparse.Namespace) -> int:
     from battery_predictor.params import load_params
     from battery_predictor.plots import plot_voltage_fit
     from battery_predictor.simulation.cell_setup import is_lumped_thermal, with_thermal
-    from battery_predictor.simulation.extensions import with_fitted_extension_keys
+    from battery_predictor.simulation.extensions import with_cold_window_anchors, with_fitted_extension_keys
 
     check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
     check_plot_file(args.plot or Path(args.out).with_suffix(".png"))
-    params = with_fitted_extension_keys(with_thermal(load_params(args.params), getattr(args, "thermal", "params")))
+    params = with_fitted_extension_keys(with_cold_window_anchors(
+        with_thermal(load_params(args.params), getattr(args, "thermal", "params"))))
     thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
     space = _space(params, recs, tuple(args.coordinates))

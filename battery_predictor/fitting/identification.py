@@ -336,6 +336,19 @@ def distinct_best(candidates: list[tuple[float, np.ndarray]], count: int,
     return picked
 
 
+def with_start(picked: list[np.ndarray], start: np.ndarray) -> list[np.ndarray]:
+    """``picked`` with the start point refined second (first when it is the best candidate).
+
+    The start (the params the user gave) is the prior: a refinement from it always runs, so the
+    identification never ends worse than the local optimum next to the user's params, while the best
+    TPE candidate still goes first. Candidates are otherwise kept in their order.
+    """
+    rest = [p for p in picked if not np.array_equal(p, start)]
+    if picked and np.array_equal(picked[0], start):
+        return [start] + rest
+    return rest[:1] + [start] + rest[1:]
+
+
 def _fd_jacobian(residual: Callable[[np.ndarray], np.ndarray], unit: np.ndarray, step: float = FD_STEP) -> np.ndarray:
     """Forward differences on the unit cube (backward at the upper bound)."""
     f0 = residual(unit)
@@ -348,18 +361,16 @@ def _fd_jacobian(residual: Callable[[np.ndarray], np.ndarray], unit: np.ndarray,
     return jac
 
 
-def _refine(residual: Callable[[np.ndarray], np.ndarray], start: np.ndarray, max_evaluations: int) -> float:
-    """Trust-region reflective least squares from ``start``; returns the lowest cost it reached.
-
-    The evaluation log keeps the best point across all refinements.
-    """
+def _refine(residual: Callable[[np.ndarray], np.ndarray], start: np.ndarray,
+            max_evaluations: int) -> tuple[float, np.ndarray]:
+    """Trust-region reflective least squares from ``start``; returns the lowest cost it reached and where."""
     from scipy.optimize import least_squares
 
-    seen: list[float] = []
+    seen: list[tuple[float, np.ndarray]] = []
 
     def tracked(unit: np.ndarray) -> np.ndarray:
         r = residual(unit)
-        seen.append(float(r @ r))
+        seen.append((float(r @ r), np.array(unit, dtype=float)))
         return r
 
     try:
@@ -367,7 +378,28 @@ def _refine(residual: Callable[[np.ndarray], np.ndarray], start: np.ndarray, max
                       x_scale=1.0, max_nfev=max(2, max_evaluations), xtol=1e-6, ftol=1e-8, gtol=1e-8)
     except BudgetExhausted:
         pass
-    return min(seen, default=math.inf)
+    return min(seen, key=lambda c: c[0], default=(math.inf, start))
+
+
+def select_by_r2_mod(problem: IdentificationProblem, ends: Sequence[tuple[float, np.ndarray]]) -> tuple[float, np.ndarray]:
+    """The end point with the highest R2_mod (seed paper Eq. 1-3); ties and failures go by the cost.
+
+    The residual vector is a continuous stand-in for R2_mod (it clips a dip below ``U_min`` where Eq. 1
+    truncates), so two refinements' end points can rank differently by cost and by R2_mod; the fit
+    reports R2_mod, so it chooses by it.
+    """
+    best: tuple[float, float, np.ndarray] | None = None
+    for cost, unit in ends:
+        try:
+            r2 = problem.score(problem.coordinates(unit)).r2_mod
+        except SimulationError:
+            r2 = -math.inf
+        r2 = r2 if math.isfinite(r2) else -math.inf
+        if best is None or (r2, -cost) > (best[0], -best[1]):
+            best = (r2, cost, unit)
+    if best is None:
+        raise BatteryPredictorError("no end point to select from")
+    return best[1], best[2]
 
 
 def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: int = 0,
@@ -418,22 +450,22 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
         candidates = [(float(r @ r), start)]
     tpe_count = log.count
     note("tpe")
-    picked = distinct_best(candidates, len(candidates))
+    picked = with_start(distinct_best(candidates, len(candidates)), start)
     jacobian_cost = len(problem.space) + 1
-    refined = 0
+    budget = max(log.count, evaluations - (max(1, starts) + 1))  # the rest scores the end points
+    ends = [(log.best_cost, log.best_unit if log.best_unit is not None else start)]
     for k, unit in enumerate(picked):
-        remaining = evaluations - log.count
+        remaining = budget - log.count
         if remaining < MIN_LEFTOVER_JACOBIANS * jacobian_cost:
             break
         planned_left = max(max(1, starts) - k, 1)
         log.budget = log.count + min(remaining, max(remaining // planned_left, MIN_REFINE_JACOBIANS * jacobian_cost))
-        reached = _refine(residual, unit, max_evaluations=log.budget - log.count)
-        log.budget = evaluations
-        refined += 1
-        note(f"refine {k + 1} (reached {reached:.4g})")
-    best = log.best_unit if log.best_unit is not None else start
-    return IdentificationResult(coordinates=problem.coordinates(best), unit=best, cost=log.best_cost,
-                                evaluations=log.count, tpe_evaluations=tpe_count, starts=refined,
+        ends.append(_refine(residual, unit, max_evaluations=log.budget - log.count))
+        log.budget = budget
+        note(f"refine {k + 1} (reached {ends[-1][0]:.4g})")
+    cost, best = select_by_r2_mod(problem, ends)
+    return IdentificationResult(coordinates=problem.coordinates(best), unit=best, cost=cost,
+                                evaluations=log.count + len(ends), tpe_evaluations=tpe_count, starts=len(ends) - 1,
                                 seconds=time.perf_counter() - tic, history=history)
 
 

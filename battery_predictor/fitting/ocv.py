@@ -25,8 +25,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from battery_predictor.errors import InputDataError, ParamsError
-from battery_predictor.fitting.identifiable import FARADAY_C_MOL, ocp_curves, sto_grid
-from battery_predictor.ocp import CONSTANT_KEY, PREFIX, SLOPE_KEY, evaluate
+from battery_predictor.fitting.identifiable import FARADAY_C_MOL
+from battery_predictor.ocp import CONSTANT_KEY, PREFIX, SLOPE_KEY, evaluate, ocp_curves, sto_grid
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording
 

@@ -71,6 +71,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from battery_predictor.errors import SimulationError
+from battery_predictor.ocp import initial_stoichiometries
 from battery_predictor.params import PackParams
 from battery_predictor.simulation.engine.pack import series_resistance_factor as arrhenius_factor
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
@@ -245,6 +247,44 @@ def extension_value(params: PackParams, key: str) -> float:
     raise KeyError(key)
 
 
+#: The stoichiometries each electrode's cold window narrows towards: the charged end of the cell they are
+#: computed for (:func:`cold_window_anchors`), or fixed in ``cell.extra`` (:func:`with_cold_window_anchors`).
+COLD_ANCHOR_KEYS = ("Negative electrode cold window anchor stoichiometry [-]",
+                    "Positive electrode cold window anchor stoichiometry [-]")
+
+
+def cold_window_active(params: PackParams) -> bool:
+    """True when the ``temperature`` extension narrows the stoichiometry windows (a nonzero :data:`COLD_WINDOW`)."""
+    return "temperature" in params.extensions and extension_value(params, COLD_WINDOW) != 0.0
+
+
+def cold_window_anchors(params: PackParams, pv: pybamm.ParameterValues | None = None) -> tuple[float, float] | None:
+    """(negative, positive) anchor stoichiometries of the cold window: ``cell.extra``'s, else the charged end.
+
+    ``pv`` are the params' PyBaMM values when the caller has them. None when the cell has no
+    electrode balance at its upper voltage (then no window narrows).
+    """
+    vals = params.cell_values
+    if all(k in vals for k in COLD_ANCHOR_KEYS):
+        return float(vals[COLD_ANCHOR_KEYS[0]]), float(vals[COLD_ANCHOR_KEYS[1]])
+    return _charged_stoichiometries(params, pv if pv is not None else params.parameter_values())
+
+
+def with_cold_window_anchors(params: PackParams) -> PackParams:
+    """``params`` with its cold-window anchors fixed in ``cell.extra`` (unchanged without an active window).
+
+    A fit moves the electrode capacities; with the anchors of its start fixed, every candidate narrows
+    towards the same stoichiometries, so one engine extraction serves them all and the cost of a candidate
+    does not depend on the candidates before it.
+    """
+    if not cold_window_active(params) or all(k in params.extra for k in COLD_ANCHOR_KEYS):
+        return params
+    anchors = cold_window_anchors(params)
+    if anchors is None:
+        return params
+    return replace(params, extra={**params.extra, **dict(zip(COLD_ANCHOR_KEYS, anchors, strict=True))})
+
+
 #: Extension keys a fit may search (``fitting.identifiable``), by extension.
 FITTED_EXTENSION_KEYS: dict[str, tuple[str, ...]] = {"hysteresis": (HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL)}
 
@@ -392,14 +432,32 @@ def _cold_window_ocp(ocp: Callable[[pybamm.Symbol], pybamm.Symbol],
     return narrowed
 
 
-def _charged_stoichiometries(pv: pybamm.ParameterValues) -> tuple[float, float] | None:
-    """(x_100, y_100): both electrodes' stoichiometries at 100 % SOC of ``pv`` (None when PyBaMM cannot solve them)."""
-    import pybamm
+def _electrode_scale(pv: pybamm.ParameterValues, domain: str) -> float:
+    """``eps L c_max`` of an electrode (its capacity up to the factor ``F A / 3600`` both share)."""
+    return (float(pv[f"{domain} electrode active material volume fraction"])
+            * float(pv[f"{domain} electrode thickness [m]"])
+            * float(pv[f"Maximum concentration in {domain.lower()} electrode [mol.m-3]"]))
 
+
+def _charged_stoichiometries(params: PackParams, pv: pybamm.ParameterValues) -> tuple[float, float] | None:
+    """(x_100, y_100): both electrodes' stoichiometries at 100 % SOC of ``pv``, None when no such pair exists.
+
+    The electrode balance of PyBaMM's ``get_min_max_stoichiometries`` (the cyclable lithium of the initial
+    concentrations, the OCV at 100 % SOC, the OCPs at the reference temperature) solved on the OCP tables
+    of :func:`battery_predictor.ocp.ocp_curves`: milliseconds instead of a PyBaMM solve per parameter set.
+    """
     try:
-        _, x100, y100, _ = pybamm.lithium_ion.get_min_max_stoichiometries(pv)
-        return float(x100), float(y100)
-    except Exception:  # noqa: BLE001 - a window PyBaMM cannot solve: no narrowing
+        q_n, q_p = _electrode_scale(pv, "Negative"), _electrode_scale(pv, "Positive")
+        q_li = (float(pv["Initial concentration in negative electrode [mol.m-3]"]) / float(
+            pv["Maximum concentration in negative electrode [mol.m-3]"]) * q_n
+                + float(pv["Initial concentration in positive electrode [mol.m-3]"]) / float(
+                    pv["Maximum concentration in positive electrode [mol.m-3]"]) * q_p)
+        keys = set(pv.keys())
+        v_max = float(pv["Open-circuit voltage at 100% SOC [V]"] if "Open-circuit voltage at 100% SOC [V]" in keys
+                      else pv["Upper voltage cut-off [V]"])
+        t_ref = float(pv["Reference temperature [K]"]) if "Reference temperature [K]" in keys else 298.15
+        return initial_stoichiometries(params, q_n, q_p, q_li, v_max, t_ref)
+    except (TypeError, KeyError, SimulationError):  # function-valued inputs or no balance: no narrowing
         return None
 
 
@@ -442,7 +500,7 @@ def apply_extension_parameter_values(params: PackParams, pv: Any) -> Any:
             j0_key = f"{domain} electrode exchange-current density [A.m-2]"
             if j0_key in keys and callable(pv[j0_key]):
                 pv[j0_key] = _arrhenius_exchange_current(pv[j0_key], t_ref)
-        charged = _charged_stoichiometries(pv)
+        charged = cold_window_anchors(params, pv)
         ocp_keys = ("Negative electrode OCP [V]", "Positive electrode OCP [V]")
         if charged is not None and all(callable(pv[k]) for k in ocp_keys):
             for key, sto_charged in zip(ocp_keys, charged):

@@ -13,21 +13,24 @@ import pytest
 from battery_predictor.errors import ParamsError, SimulationError
 from battery_predictor.fitting.identifiability import analyse
 from battery_predictor.fitting.identifiable import (
+    FULL_OCV_MARGIN_V,
     default_space,
-    initial_stoichiometries,
-    ocp_curves,
     pybamm_values,
     shipped_coordinates,
 )
 from battery_predictor.fitting.identification import (
+    CandidateScore,
     IdentificationProblem,
     distinct_best,
     identifiability_of,
     identify,
+    select_by_r2_mod,
     startup_trials,
+    with_start,
 )
 from battery_predictor.fitting.resample import resample_windows
 from battery_predictor.fitting.space import fit_space
+from battery_predictor.ocp import initial_stoichiometries, ocp_curves
 from battery_predictor.params import load_params
 from battery_predictor.recording import Recording
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
@@ -110,6 +113,42 @@ def test_data_starting_above_the_upper_cutoff_warn_and_get_a_box_around_their_vo
         space = default_space(panasonic, [rec])
     state = space[-1]
     assert state.name == "initial_ocv_v:0" and state.contains(4.30)
+
+
+def test_the_initial_ocv_box_stops_just_above_the_charged_voltage(panasonic):
+    t = np.arange(0.0, 600.0, 10.0)
+    rest = Recording(t, np.full(t.size, 4.19), np.full(t.size, 1.0), source="rest.csv")
+    state = default_space(panasonic, [rest])[-1]
+    upper_v = float(panasonic.parameter_values()["Upper voltage cut-off [V]"])
+    assert state.high == pytest.approx(upper_v + FULL_OCV_MARGIN_V)
+    assert state.low == pytest.approx(4.19 - 0.15)
+    low = Recording(t, np.full(t.size, 3.70), np.full(t.size, 1.0), source="low.csv")
+    assert default_space(panasonic, [low])[-1].high == pytest.approx(3.70 + 0.35)
+
+
+def test_the_start_point_is_refined_second_unless_it_is_the_best():
+    start, a, b = np.array([0.5, 0.5]), np.array([0.1, 0.9]), np.array([0.9, 0.1])
+    assert [p.tolist() for p in with_start([a, b], start)] == [a.tolist(), start.tolist(), b.tolist()]
+    assert [p.tolist() for p in with_start([start, a], start)] == [start.tolist(), a.tolist()]
+    assert [p.tolist() for p in with_start([a, start, b], start)] == [a.tolist(), start.tolist(), b.tolist()]
+
+
+def test_the_end_point_is_chosen_by_r2_mod_not_by_the_residual_cost():
+    class Problem:
+        def coordinates(self, unit):
+            return {"x": float(unit[0])}
+
+        def score(self, coordinates):
+            if coordinates["x"] < 0:
+                raise SimulationError("failed")
+            return dataclasses.replace(SCORE, r2_mod={0.2: 0.95, 0.4: 0.97, 0.6: 0.96}[coordinates["x"]])
+
+    ends = [(0.01, np.array([0.2])), (0.02, np.array([0.4])), (0.005, np.array([0.6])), (0.0, np.array([-1.0]))]
+    cost, unit = select_by_r2_mod(Problem(), ends)
+    assert unit.tolist() == [0.4] and cost == 0.02
+
+
+SCORE = CandidateScore(r2_mod=0.0, per_recording=[], rmse_mv=[], results=[], values=[])
 
 
 def test_resampling_keeps_the_first_sample_and_the_charge_drawn():

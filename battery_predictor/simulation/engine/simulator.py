@@ -71,9 +71,12 @@ from battery_predictor.simulation.engine.thermal import (
     heat_capacity,
 )
 from battery_predictor.simulation.extensions import (
+    COLD_ANCHOR_KEYS,
     HYS_DECAY,
     HYS_HALF_WIDTH,
     HYS_INITIAL,
+    cold_window_active,
+    cold_window_anchors,
     extension_value,
     hysteresis_rate_per_c,
     series_resistance_factor,
@@ -368,7 +371,8 @@ class EngineSimulator:
         scalable = self._scalable_keys(params)
         fixed = tuple(sorted((k, repr(v)) for k, v in values.items()
                              if k not in scalable and k not in _STATE_KEYS and k not in _BESIDE_KEYS))
-        key = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions, fixed)
+        key = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions, fixed,
+               self._cold_anchors(params))
         if key in self._cache:
             self._cache.move_to_end(key)
             model, modal = self._cache[key]
@@ -392,6 +396,12 @@ class EngineSimulator:
         if model.thermal is not None:
             factors["heat_rate"] = self._heat_rate(model, pv, temperature_k, factors)
         return model, modal, ParameterSets(**factors)
+
+    def _cold_anchors(self, params: PackParams) -> tuple[float, float] | None:
+        """The cold window's anchors the extraction bakes in, when they follow the cell's values (part of the cache key)."""
+        if not cold_window_active(params) or all(k in params.cell_values for k in COLD_ANCHOR_KEYS):
+            return None
+        return cold_window_anchors(params, self._parameter_values(params))
 
     def _heat_rate(self, model: LinearSpm, pv: pybamm.ParameterValues, temperature_k: float,
                    factors: dict) -> np.ndarray:
