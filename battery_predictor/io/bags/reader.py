@@ -109,15 +109,7 @@ def recording_from_messages(source: str, style: str, name: str, got: Mapping[str
     its decoded custom data.
     """
     if style == "battery_state":
-        msgs = got.get(name, [])
-        if not msgs:
-            raise BagError(f"{source}: topic {name} has no messages")
-        ns = np.array([_stamp_ns(log, m.header) for log, m in msgs], dtype=np.int64)
-        v = np.array([m.voltage for _, m in msgs], dtype=float)
-        i = np.asarray(battery_state_current_to_internal(np.array([m.current for _, m in msgs], dtype=float)))
-        temp_c = np.array([m.temperature for _, m in msgs], dtype=float)
-        ns, (v, i, temp_c), dup = _sorted_unique(ns, v, i, temp_c)
-        extra = {"dropped_duplicate_stamps": dup}
+        ns, v, i, temp_c, extra = _battery_states(source, name, got.get(name, []))
         where = name
     else:
         ns, v, i, temp_c, extra = _merge_relay(source, name, got)
@@ -152,6 +144,19 @@ def recording_from_messages(source: str, style: str, name: str, got: Mapping[str
         extra_meta["filled_temperature_samples"] = filled
     meta.update(extra_meta)
     return Recording(time_s=time_s, voltage_v=v, current_a=i, temperature_k=temperature_k, source=source, metadata=meta)
+
+
+def _battery_states(source: str, name: str, msgs: list[tuple[int, Any]]
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
+    """The BatteryState messages' (stamps ns, V, A, degC, notes), sorted, the last of each repeated stamp kept."""
+    if not msgs:
+        raise BagError(f"{source}: topic {name} has no messages")
+    ns = np.array([_stamp_ns(log, m.header) for log, m in msgs], dtype=np.int64)
+    v = np.array([m.voltage for _, m in msgs], dtype=float)
+    i = np.asarray(battery_state_current_to_internal(np.array([m.current for _, m in msgs], dtype=float)))
+    temp_c = np.array([m.temperature for _, m in msgs], dtype=float)
+    ns, (v, i, temp_c), dup = _sorted_unique(ns, v, i, temp_c)
+    return ns, v, i, temp_c, {"dropped_duplicate_stamps": dup}
 
 
 def _times(ns: np.ndarray, origin: tuple[int, float] | None) -> np.ndarray:
