@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import yaml
 
-from battery_predictor.config import yaml_number
+from battery_predictor.config import read_yaml, yaml_number
 from battery_predictor.errors import ParamsError
 from battery_predictor.ocp import cell_parameter_values, section_to_values, values_to_section
 from battery_predictor.params_checks import check_physical
@@ -556,12 +556,7 @@ def load_params(path: str | Path) -> PackParams:
         raise ParamsError(f"{path}: is a directory, expected a params YAML file such as params/temi.yaml")
     if not path.is_file():
         raise ParamsError(f"{path}: params file not found")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1}" if mark is not None else ""
-        raise ParamsError(f"{path}:{where} YAML syntax error: {getattr(exc, 'problem', exc)}") from None
+    path, data = read_yaml(path)
     if data is None:
         raise ParamsError(f"{path}: params file is empty")
     return params_from_dict(data, source=str(path))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from battery_predictor.config import read_yaml_mapping
+from battery_predictor.config import read_yaml_mapping, yaml_number
 from battery_predictor.errors import ParamsError
 from battery_predictor.params import PackParams
 
@@ -69,8 +69,10 @@ def check_nodes_against_pack(source: Path, monitor: dict, predictor: dict, *,
                           "temi.yaml)")
     params = load_params(resolved)
     if "min_voltage_v" in monitor or "max_voltage_v" in monitor:
-        check_monitor_range(float(monitor.get("min_voltage_v", 0.0)), float(monitor.get("max_voltage_v", 100.0)),
-                            params, str(source))
-    check_node_voltages(str(source), params, {f"predictor.{key}": float(predictor.get(key, 0.0) or 0.0)
-                                              for key in ("cutoff_voltage_v", "route_min_voltage_v")})
+        low, high = (yaml_number(monitor.get(key, default), source, f"battery_monitor.{key}", allow_nan=True)
+                     for key, default in (("min_voltage_v", 0.0), ("max_voltage_v", 100.0)))
+        check_monitor_range(low, high, params, str(source))
+    check_node_voltages(str(source), params, {
+        f"predictor.{key}": yaml_number(predictor.get(key, 0.0) or 0.0, source, f"predictor.{key}", allow_nan=True)
+        for key in ("cutoff_voltage_v", "route_min_voltage_v")})
     return params

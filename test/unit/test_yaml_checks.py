@@ -1,5 +1,6 @@
-"""One rule for numbers in every YAML file of the package (docs/decisions.md, "Numbers in YAML files").
+"""One set of YAML checks for every YAML file of the package: reading, and numbers.
 
+Numbers (docs/decisions.md, "Numbers in YAML files"):
 A YAML number, or a string YAML 1.2 reads as a decimal number (``1e-3``: PyYAML's YAML 1.1 loads it as
 a string), is accepted; any other string fails with one line naming the file and the key. The same
 rule holds for pack params (:mod:`battery_predictor.params`, its ``cell.ocp`` section) and the other
@@ -13,7 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from battery_predictor.config import yaml_number
+from battery_predictor.config import read_yaml_mapping, yaml_number
 from battery_predictor.errors import ParamsError
 from battery_predictor.params import load_params
 from battery_predictor.profiles.station import load_station
@@ -123,3 +124,39 @@ def test_station_map_refuses_other_strings_naming_the_key(tmp_path):
         load_station(path)
     msg = str(err.value)
     assert str(path) in msg and "edges[0].segments[0].length_m" in msg and "\n" not in msg
+
+
+# ------------------------------------------------------------------------------------------- reading
+def test_a_syntax_error_names_the_file_and_line_for_every_reader(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text("pack:\n  series: 4\n  parallel: [6\n")
+    for read in (load_params, load_station, read_yaml_mapping):
+        with pytest.raises(ParamsError) as err:
+            read(path)
+        msg = str(err.value)
+        assert msg.startswith(f"{path}: line ") and "YAML syntax error" in msg and "\n" not in msg
+
+
+def test_a_directory_is_refused_in_one_line(tmp_path):
+    for read in (load_params, load_station):
+        with pytest.raises(ParamsError, match="is a directory"):
+            read(tmp_path)
+
+
+# --------------------------------------------------------------------------- node params (cli/_ros_params)
+def _node_file(tmp_path: Path, **predictor: object) -> Path:
+    data = yaml.safe_load((REPO / "params" / "ros" / "temi_nodes.yaml").read_text())
+    data["predictor"]["ros__parameters"].update(predictor)
+    path = tmp_path / "nodes.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_node_params_use_the_same_rule(tmp_path):
+    from battery_predictor.cli._ros_params import check_node_params_file
+
+    assert check_node_params_file(str(_node_file(tmp_path, cutoff_voltage_v="1.33e1"))) is not None
+    assert check_node_params_file(str(_node_file(tmp_path, cutoff_voltage_v=float("nan")))) is not None  # "from the pack"
+    with pytest.raises(ParamsError) as err:
+        check_node_params_file(str(_node_file(tmp_path, cutoff_voltage_v="13.3 V")))
+    assert "'predictor.cutoff_voltage_v'" in str(err.value) and "\n" not in str(err.value)
