@@ -6,15 +6,20 @@ of ``make setup`` reads the files you edit), then ``<prefix>/share/battery_predi
 every prefix on ``AMENT_PREFIX_PATH`` (a colcon install) and for ``sys.prefix`` (where ``setup.py``
 installs the data files).
 
-The YAML checks (:func:`read_yaml_mapping`, :func:`require`, :func:`check_unknown`,
-:func:`as_float`, :func:`as_float_list`) raise :class:`~battery_predictor.errors.ParamsError`
-with a one-line message naming the file and the dotted key.
+The YAML checks (:func:`read_yaml`, :func:`read_yaml_mapping`, :func:`require`, :func:`check_unknown`,
+:func:`yaml_number`, :func:`as_float`, :func:`as_float_list`) raise
+:class:`~battery_predictor.errors.ParamsError` with a one-line message naming the file and the
+dotted key. Every reader of a YAML file of this package (pack params, load profiles, station maps,
+node params) converts numbers with :func:`yaml_number`, so one rule holds everywhere: a YAML number,
+or a string that YAML 1.2 reads as a decimal number (``1e-3``, which PyYAML's YAML 1.1 loads as the
+string ``"1e-3"``); any other string is refused (docs/decisions.md, "Numbers in YAML files").
 """
 
 from __future__ import annotations
 
 import math
 import os
+import re
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -25,6 +30,10 @@ import yaml
 from battery_predictor.errors import ParamsError
 
 PACKAGE = "battery_predictor"
+
+#: A decimal number as YAML 1.2's core schema reads it: ``1e-3``, ``-2.5E+4``, ``.5``, ``3``, ``4.``.
+#: PyYAML (YAML 1.1) loads the forms without a dot or without an exponent sign as strings.
+YAML12_DECIMAL = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?")
 
 
 def params_dirs() -> list[Path]:
@@ -67,18 +76,28 @@ def resolve_params_file(value: str) -> str:
     return value
 
 
-def read_yaml_mapping(path: str | Path, *,
-                      not_mapping: str = "top level must be a mapping of keys") -> tuple[Path, dict[str, Any]]:
-    """Read a YAML file whose top level is a mapping; ParamsError (``not_mapping`` when it is not) otherwise."""
+def read_yaml(path: str | Path) -> tuple[Path, Any]:
+    """Read a YAML file (any content); ParamsError naming the file when it is a directory, cannot be read,
+    or is not valid YAML (with the line of the syntax error)."""
     path = Path(path)
+    if path.is_dir():
+        raise ParamsError(f"{path}: is a directory, expected a YAML file")
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ParamsError(f"{path}: cannot read params file ({exc.strerror})") from None
     try:
-        data = yaml.safe_load(text)
+        return path, yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise ParamsError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark is not None else ""
+        raise ParamsError(f"{path}:{where} YAML syntax error: {getattr(exc, 'problem', exc)}") from None
+
+
+def read_yaml_mapping(path: str | Path, *,
+                      not_mapping: str = "top level must be a mapping of keys") -> tuple[Path, dict[str, Any]]:
+    """Read a YAML file (:func:`read_yaml`) whose top level is a mapping; ParamsError (``not_mapping``) otherwise."""
+    path, data = read_yaml(path)
     if not isinstance(data, dict):
         raise ParamsError(f"{path}: {not_mapping}")
     return path, data
@@ -100,13 +119,32 @@ def check_unknown(mapping: Mapping[str, Any], allowed: set[str], path: Path, whe
         raise ParamsError(f"{path}: unknown key {_join(where, str(unknown[0]))} (allowed: {', '.join(sorted(allowed))})")
 
 
+def yaml_number(value: Any, source: str | Path, key: str, *, allow_nan: bool = False) -> float:
+    """A YAML value as a finite float; ParamsError naming ``source`` and the dotted ``key`` otherwise.
+
+    Accepted: a number (not a boolean), or a string that YAML 1.2 reads as a decimal number
+    (:data:`YAML12_DECIMAL`, e.g. ``1e-3``). Refused: any other string (``"1,5"``, ``"3.7 V"``,
+    ``"0x10"``, ``"1_000"``), booleans, lists, mappings, and infinite or NaN values (NaN passes with
+    ``allow_nan``: node parameters where ``.nan`` means "from the params file").
+    """
+    if isinstance(value, str):
+        if not YAML12_DECIMAL.fullmatch(value):
+            raise ParamsError(f"{source}: key '{key}': expected a number, got the string {value!r}; write a plain "
+                              "decimal number without quotes or units, such as 0.001 or 1e-3")
+    elif isinstance(value, bool) or value is None:
+        raise ParamsError(f"{source}: key '{key}': expected a number, got {value!r}")
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ParamsError(f"{source}: key '{key}': expected a number, got {value!r}") from None
+    if not math.isfinite(number) and not (allow_nan and math.isnan(number)):
+        raise ParamsError(f"{source}: key '{key}': value {value!r} is not finite")
+    return number
+
+
 def as_float(value: Any, path: Path, key: str, *, minimum: float | None = None, strict: bool = False) -> float:
-    """Convert to a finite float, optionally ``>= minimum`` (``> minimum`` if strict)."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ParamsError(f"{path}: {key} must be a number, got {value!r}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise ParamsError(f"{path}: {key} must be finite, got {value!r}")
+    """Convert to a finite float (:func:`yaml_number`), optionally ``>= minimum`` (``> minimum`` if strict)."""
+    number = yaml_number(value, path, key)
     if minimum is not None and (number <= minimum if strict else number < minimum):
         relation = ">" if strict else ">="
         raise ParamsError(f"{path}: {key} must be {relation} {minimum:g}, got {number:g}")

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from battery_predictor.config import yaml_number
 from battery_predictor.errors import ParamsError, SimulationError
 
 if TYPE_CHECKING:
@@ -143,14 +144,14 @@ def section_to_values(section: Mapping[str, Any], source: str) -> dict[str, floa
     for key in pos:
         if key not in allowed:
             raise ParamsError(f"{source}: unknown key 'cell.ocp.positive.{key}' (allowed: {', '.join(sorted(allowed))})")
-    try:
-        constant, slope = float(pos["constant_v"]), float(pos["slope_v"])
-        centres, widths, coefs = ([float(x) for x in pos[k]] for k in ("centres", "widths", "coefficients_v"))
-    except KeyError as exc:
-        raise ParamsError(f"{source}: missing key 'cell.ocp.positive.{exc.args[0]}'") from None
-    except (TypeError, ValueError):
-        raise ParamsError(f"{source}: key 'cell.ocp.positive': constant_v and slope_v must be numbers, "
-                          "centres, widths and coefficients_v lists of numbers") from None
+    for key in ("constant_v", "slope_v", "centres", "widths", "coefficients_v"):
+        if key not in pos:
+            raise ParamsError(f"{source}: missing key 'cell.ocp.positive.{key}'")
+    where = "cell.ocp.positive"
+    constant = yaml_number(pos["constant_v"], source, f"{where}.constant_v")
+    slope = yaml_number(pos["slope_v"], source, f"{where}.slope_v")
+    centres, widths, coefs = (_number_list(pos[k], source, f"{where}.{k}") for k in ("centres", "widths",
+                                                                                      "coefficients_v"))
     if not (len(centres) == len(widths) == len(coefs)) or len(centres) > MAX_TERMS:
         raise ParamsError(f"{source}: key 'cell.ocp.positive': centres, widths and coefficients_v must have the "
                           f"same length (at most {MAX_TERMS}), got {len(centres)}, {len(widths)}, {len(coefs)}")
@@ -163,6 +164,12 @@ def section_to_values(section: Mapping[str, Any], source: str) -> dict[str, floa
         values[f"{PREFIX} width {k:02d}"] = w
         values[f"{PREFIX} coefficient {k:02d} [V]"] = c
     return values
+
+
+def _number_list(value: Any, source: str, key: str) -> list[float]:
+    if not isinstance(value, list):
+        raise ParamsError(f"{source}: key '{key}': expected a list of numbers, got {value!r}")
+    return [yaml_number(x, source, f"{key}[{i}]") for i, x in enumerate(value)]
 
 
 def values_to_section(values: Mapping[str, float], source: str = "") -> dict[str, Any]:

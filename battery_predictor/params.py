@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import copy
 import functools
-import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -21,6 +20,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import yaml
 
+from battery_predictor.config import read_yaml, yaml_number
 from battery_predictor.errors import ParamsError
 from battery_predictor.ocp import cell_parameter_values, section_to_values, values_to_section
 from battery_predictor.params_checks import check_physical
@@ -117,18 +117,6 @@ def _check_unit_suffix(key: str, source: str, section: str) -> None:
             f"{source}: key '{section}.{key}': missing unit; our keys end in a unit suffix such as "
             f"{', '.join(UNIT_SUFFIXES[:6])}"
         )
-
-
-def _as_float(value: Any, source: str, key: str) -> float:
-    if isinstance(value, bool):
-        raise ParamsError(f"{source}: key '{key}': expected a number, got {value!r}")
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise ParamsError(f"{source}: key '{key}': expected a number, got {value!r}") from None
-    if not math.isfinite(out):
-        raise ParamsError(f"{source}: key '{key}': value {value!r} is not finite")
-    return out
 
 
 @dataclass(frozen=True)
@@ -326,7 +314,7 @@ def _unit_scalars(section: Mapping[str, Any], name: str, source: str) -> dict[st
     out = {}
     for k, v in section.items():
         _check_unit_suffix(str(k), source, name)
-        out[str(k)] = _as_float(v, source, f"{name}.{k}")
+        out[str(k)] = yaml_number(v, source, f"{name}.{k}")
     return out
 
 
@@ -404,7 +392,7 @@ def _pack_from(data: Mapping[str, Any], source: str) -> tuple[int, int, dict[str
         val = pack[key]
         if isinstance(val, bool) or not isinstance(val, int) or val < 1:
             raise ParamsError(f"{source}: key 'pack.{key}': expected a positive integer, got {val!r}")
-    pack_info = {k: _as_float(v, source, f"pack.{k}") for k, v in pack.items() if k not in ("series", "parallel")}
+    pack_info = {k: yaml_number(v, source, f"pack.{k}") for k, v in pack.items() if k not in ("series", "parallel")}
     return int(pack["series"]), int(pack["parallel"]), pack_info
 
 
@@ -438,7 +426,7 @@ def _cell_from(data: Mapping[str, Any], source: str) -> _Cell:
     for key, val in (cell.get("extra") or {}).items():
         if "[" not in str(key) and not str(key).endswith("fraction"):
             raise ParamsError(f"{source}: key 'cell.extra.{key}': missing unit (use a PyBaMM '[unit]' key)")
-        extra[str(key)] = _as_float(val, source, f"cell.extra.{key}")
+        extra[str(key)] = yaml_number(val, source, f"cell.extra.{key}")
     manual = _pybamm_values(cell, "manual", base, frozenset(extra), source)
     fitted = _pybamm_values(cell, "fitted", base, frozenset(extra), source)
     ocp_raw = cell.get("ocp") or {}
@@ -470,7 +458,7 @@ def _pybamm_values(cell: Mapping[str, Any], section: str, base: str, extra_keys:
     out = {}
     for key, val in raw.items():
         check_pybamm_key(str(key), base, source, extra_keys)
-        out[str(key)] = _as_float(val, source, f"cell.{section}.{key}")
+        out[str(key)] = yaml_number(val, source, f"cell.{section}.{key}")
     return out
 
 
@@ -483,7 +471,7 @@ def _interconnect_from(data: Mapping[str, Any], source: str) -> dict[str, float]
                 raise ParamsError(f"{source}: key 'interconnect.{key}': missing unit (expected one of "
                                   f"{', '.join(INTERCONNECT_KEYS)})")
             raise ParamsError(f"{source}: unknown key 'interconnect.{key}' (allowed: {', '.join(INTERCONNECT_KEYS)})")
-        v = _as_float(val, source, f"interconnect.{key}")
+        v = yaml_number(val, source, f"interconnect.{key}")
         if v <= 0:
             raise ParamsError(f"{source}: key 'interconnect.{key}': resistance must be > 0 (liionpack's netlist "
                               f"needs a conductance), got {v}")
@@ -507,7 +495,7 @@ def _fit_from(data: Mapping[str, Any], source: str, base: str, extra_keys: froze
     for key, pair in (fit_raw.get("bounds") or {}).items():
         if not isinstance(pair, (list, tuple)) or len(pair) != 2:
             raise ParamsError(f"{source}: key 'fit.bounds.{key}': expected [low, high]")
-        lo, hi = (_as_float(x, source, f"fit.bounds.{key}") for x in pair)
+        lo, hi = (yaml_number(x, source, f"fit.bounds.{key}") for x in pair)
         if not lo < hi:
             raise ParamsError(f"{source}: key 'fit.bounds.{key}': low {lo} must be below high {hi}")
         bounds[str(key)] = (lo, hi)
@@ -568,12 +556,7 @@ def load_params(path: str | Path) -> PackParams:
         raise ParamsError(f"{path}: is a directory, expected a params YAML file such as params/temi.yaml")
     if not path.is_file():
         raise ParamsError(f"{path}: params file not found")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1}" if mark is not None else ""
-        raise ParamsError(f"{path}:{where} YAML syntax error: {getattr(exc, 'problem', exc)}") from None
+    path, data = read_yaml(path)
     if data is None:
         raise ParamsError(f"{path}: params file is empty")
     return params_from_dict(data, source=str(path))

@@ -62,7 +62,7 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     discovery on this machine only; with ``shared_domain``, rclpy's global one on the environment's
     domain), shut down after the replay unless given.
     """
-    from battery_predictor.cli._ros_params import check_node_params_file, node_pack_params
+    from battery_predictor.cli._ros_params import check_node_params_file
     from battery_predictor.cli.common import check_output_dir, progress_wanted, replay_progress
     from battery_predictor.errors import InputDataError
     from battery_predictor.nodes.client import isolated_context, ros_context
@@ -70,8 +70,7 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     from battery_predictor.nodes.replay_session import default_output_dir
     from battery_predictor.replay import error_summary, read_replay_stream
 
-    check_node_params_file(params, pack=pack)
-    pack_params = node_pack_params(params, pack=pack)
+    pack_params = check_node_params_file(params, pack=pack)
     if not (rate >= 0 and not math.isnan(rate)):
         raise InputDataError(f"--rate is {rate} (must be >= 0)")
     out = check_output_dir(out_dir or default_output_dir(bag), "--out")
@@ -103,7 +102,7 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
                 stream, context=context, params_file=params, out_bag=bag_out, plot=png, plot_title=title, rate=rate,
                 bag_metadata={"replay_of": str(bag), "params": str(params), "rate": rate}, overrides=overrides,
                 progress=lambda end_ns: replay_progress(stream, end_ns, "replay", enabled=not quiet and progress_wanted()),
-                truth_from_points=lambda points: measured_truth(bag, stream, pack_params, points))
+                truth_from_points=lambda points: measured_truth(stream, pack_params, points))
     finally:
         if own is not None:
             own.try_shutdown()
@@ -131,22 +130,22 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     return summary
 
 
-def measured_truth(bag: str, stream: ReplayStream, pack_params: PackParams | None,
+def measured_truth(stream: ReplayStream, pack_params: PackParams | None,
                    points: list[RuntimePoint]) -> RuntimeTruth | None:
     """The truth of a bag without one in its metadata: the measured discharge's end at the published cut-off.
 
-    None when the pack is unknown, no runtime message names a cut-off, the bag's battery samples
-    cannot be read, or the recording's end is not the cut-off.
+    The recording is the stream's own messages (:meth:`ReplayStream.recording`, as the bag reader
+    decodes them). None when the pack is unknown, no runtime message names a cut-off, the battery
+    samples cannot be decoded, or the recording's end is not the cut-off.
     """
     from battery_predictor.errors import BatteryPredictorError
     from battery_predictor.evaluation.runtime_eval import recording_runtime_truth
-    from battery_predictor.io.bags.reader import read_recording_bag
 
     cutoffs = [p.cutoff_voltage_v for p in points if math.isfinite(p.cutoff_voltage_v) and p.cutoff_voltage_v > 0]
     if pack_params is None or not cutoffs:
         return None
     try:
-        rec = read_recording_bag(bag, drop_nan=True)
+        rec = stream.recording(drop_nan=True)
     except BatteryPredictorError:
         return None
     offset_s = stream.recording_time_s(stream.start_ns) - float(rec.time_s[0])

@@ -120,64 +120,14 @@ def write_markdown(out_dir: Path, summary: dict, figures: Mapping[str, Path | No
     if settings:
         lines += ["Settings: " + ", ".join(f"{k} `{v}`" for k, v in settings.items()) + ".", ""]
     if "table2" in summary:
-        lines += ["## Information robot: optimisation and validation (Table 2)", "",
-                  "| opt. profile | parameter set | opt. R2_mod | val. R2_mod | paper opt. | paper val. |",
-                  "|---|---|---|---|---|---|"]
-        for r in summary["table2"]:
-            p = PAPER["table2"].get((r["opt_profile"], r["base_parameter_set"]), (None, None))
-            lines.append(f"| {r['opt_profile']} | {r['base_parameter_set']} | {_fmt(r['opt_r2_mod'])} | "
-                         f"{_fmt(r['val_r2_mod'])} | {_fmt(p[0])} | {_fmt(p[1])} |")
-        lines.append("")
+        lines += _table2_lines(summary["table2"])
     if "runtime" in summary:
-        rt = summary["runtime"]
-        pk = summary.get("runtime_peaks")
-        lines += ["## Information robot: remaining runtime (5.1.6)", "",
-                  "Paper strategy: simulate the present cycle's average current until 13.30 V. "
-                  + ("Predictor default (beyond the paper): the robot stops at the first measured 5 s window below "
-                     "the cut-off, which falls on a load peak; the runtime ends where a peak (the "
-                     f"{pk['peak_current_quantile']} quantile of the cycle's 5 s currents) drawn from the "
-                     "average-load trajectory meets the cut-off." if pk else ""), "",
-                  "| recording | MAE [min] | MAPE [%] | checkpoints |"
-                  + (" MAE with peaks [min] | MAPE with peaks [%] |" if pk else ""),
-                  "|---|---|---|---|" + ("---|---|" if pk else "")]
-        for name, v in rt["per_recording"].items():
-            extra = ""
-            if pk:
-                w = pk["per_recording"].get(name, {})
-                extra = f" {_fmt(w.get('mae_min'))} | {_fmt(w.get('mape_pct'))} |"
-            lines.append(f"| {Path(name).name} | {_fmt(v['mae_min'])} | {_fmt(v['mape_pct'])} | {v['points']} |"
-                         + extra)
-        lines.append(f"| **overall** | **{_fmt(rt['mae_min'])}** | **{_fmt(rt['mape_pct'])}** | |"
-                     + (f" **{_fmt(pk['mae_min'])}** | **{_fmt(pk['mape_pct'])}** |" if pk else ""))
-        lines.append(f"| paper | {PAPER['runtime_mae_min']} | {PAPER['runtime_mape_pct']} | |" + (" | |" if pk else ""))
-
-        lines += ["", f"Mean signed error {_fmt(rt.get('bias_min'))} min (positive: predicted too long) over a mean "
-                  f"actual remaining runtime of {_fmt(rt.get('mean_actual_remaining_min'), 1)} min; the MAE grows "
-                  "with the length of the discharges, the MAPE is the figure comparable with the paper's."
-                  + (f" With peaks: mean signed error {_fmt(pk.get('bias_min'))} min." if pk else ""), ""]
+        lines += _runtime_lines(summary["runtime"], summary.get("runtime_peaks"))
     if "stepwise" in summary:
         lines += ["## Luggage robot: stepwise experiment fit (5.2.3)", "",
                   f"R2_mod {_fmt(summary['stepwise']['r2_mod'], 3)} (paper: {PAPER['ranger_stepwise_r2_mod']}).", ""]
     if "routes" in summary:
-        r = summary["routes"]
-        lines += ["## Luggage robot: voltage after the longest route (5.2.4)", "",
-                  "| | MAE [V] | MAPE [%] | bias cycle 1 [V] | bias cycle 2 [V] |", "|---|---|---|---|---|",
-                  f"| ours | {_fmt(r['mae_v'])} | {_fmt(r['mape_pct'])} | {_fmt(r['bias_v_cycle1'])} | "
-                  f"{_fmt(r['bias_v_cycle2'])} |",
-                  f"| paper | {PAPER['route_mae_v']} | {PAPER['route_mape_pct']} | overestimated | underestimated |",
-                  "", f"Decisions (one more longest route, asked at the start, after cycle 1 and after cycle 2): "
-                  f"{r['decisions_correct']} of {r['decisions']} match the truth; {r['unsafe_accepts']} unsafe "
-                  "accepts (accepted although the recorded voltage fell below the threshold).", ""]
-        if summary.get("route_cases"):
-            lines += ["| recording | payload [kg] | predicted / recorded after cycle 1 [V] | after cycle 2 [V] | "
-                      "decisions (ours / truth) |", "|---|---|---|---|---|"]
-            for c in summary["route_cases"]:
-                dec = "".join("A" if d else "R" for d in c["decisions"])
-                tru = "".join("A" if d else "R" for d in c["truth"])
-                lines.append(f"| {Path(c['recording']).name} | {c['payload_kg']:.0f} | {_fmt(c['predicted_v'][0])} / "
-                             f"{_fmt(c['actual_v'][0])} | {_fmt(c['predicted_v'][1])} / {_fmt(c['actual_v'][1])} | "
-                             f"{dec} / {tru} |")
-            lines.append("")
+        lines += _routes_lines(summary["routes"], summary.get("route_cases"))
     for title, path in figures.items():
         if path is not None:
             lines += [f"![{title}]({path.name})", ""]
@@ -185,3 +135,67 @@ def write_markdown(out_dir: Path, summary: dict, figures: Mapping[str, Path | No
     out.write_text("\n".join(lines))
     (out_dir / "summary.json").write_text(json.dumps(summary, default=json_default, indent=1, allow_nan=True))
     return out
+
+
+def _table2_lines(table2: Sequence[dict]) -> list[str]:
+    """Table 2: optimisation and validation R2_mod beside the paper's."""
+    lines = ["## Information robot: optimisation and validation (Table 2)", "",
+             "| opt. profile | parameter set | opt. R2_mod | val. R2_mod | paper opt. | paper val. |",
+             "|---|---|---|---|---|---|"]
+    for r in table2:
+        p = PAPER["table2"].get((r["opt_profile"], r["base_parameter_set"]), (None, None))
+        lines.append(f"| {r['opt_profile']} | {r['base_parameter_set']} | {_fmt(r['opt_r2_mod'])} | "
+                     f"{_fmt(r['val_r2_mod'])} | {_fmt(p[0])} | {_fmt(p[1])} |")
+    lines.append("")
+    return lines
+
+
+def _runtime_lines(rt: dict, pk: dict | None) -> list[str]:
+    """The remaining-runtime table (5.1.6), with the load-peak columns when ``pk`` is given."""
+    lines = ["## Information robot: remaining runtime (5.1.6)", "",
+             "Paper strategy: simulate the present cycle's average current until 13.30 V. "
+             + ("Predictor default (beyond the paper): the robot stops at the first measured 5 s window below "
+                "the cut-off, which falls on a load peak; the runtime ends where a peak (the "
+                f"{pk['peak_current_quantile']} quantile of the cycle's 5 s currents) drawn from the "
+                "average-load trajectory meets the cut-off." if pk else ""), "",
+             "| recording | MAE [min] | MAPE [%] | checkpoints |"
+             + (" MAE with peaks [min] | MAPE with peaks [%] |" if pk else ""),
+             "|---|---|---|---|" + ("---|---|" if pk else "")]
+    for name, v in rt["per_recording"].items():
+        extra = ""
+        if pk:
+            w = pk["per_recording"].get(name, {})
+            extra = f" {_fmt(w.get('mae_min'))} | {_fmt(w.get('mape_pct'))} |"
+        lines.append(f"| {Path(name).name} | {_fmt(v['mae_min'])} | {_fmt(v['mape_pct'])} | {v['points']} |"
+                     + extra)
+    lines.append(f"| **overall** | **{_fmt(rt['mae_min'])}** | **{_fmt(rt['mape_pct'])}** | |"
+                 + (f" **{_fmt(pk['mae_min'])}** | **{_fmt(pk['mape_pct'])}** |" if pk else ""))
+    lines.append(f"| paper | {PAPER['runtime_mae_min']} | {PAPER['runtime_mape_pct']} | |" + (" | |" if pk else ""))
+    lines += ["", f"Mean signed error {_fmt(rt.get('bias_min'))} min (positive: predicted too long) over a mean "
+              f"actual remaining runtime of {_fmt(rt.get('mean_actual_remaining_min'), 1)} min; the MAE grows "
+              "with the length of the discharges, the MAPE is the figure comparable with the paper's."
+              + (f" With peaks: mean signed error {_fmt(pk.get('bias_min'))} min." if pk else ""), ""]
+    return lines
+
+
+def _routes_lines(r: dict, cases: Sequence[dict] | None) -> list[str]:
+    """The voltage after the longest route (5.2.4), its decisions, and one row per recording."""
+    lines = ["## Luggage robot: voltage after the longest route (5.2.4)", "",
+             "| | MAE [V] | MAPE [%] | bias cycle 1 [V] | bias cycle 2 [V] |", "|---|---|---|---|---|",
+             f"| ours | {_fmt(r['mae_v'])} | {_fmt(r['mape_pct'])} | {_fmt(r['bias_v_cycle1'])} | "
+             f"{_fmt(r['bias_v_cycle2'])} |",
+             f"| paper | {PAPER['route_mae_v']} | {PAPER['route_mape_pct']} | overestimated | underestimated |",
+             "", f"Decisions (one more longest route, asked at the start, after cycle 1 and after cycle 2): "
+             f"{r['decisions_correct']} of {r['decisions']} match the truth; {r['unsafe_accepts']} unsafe "
+             "accepts (accepted although the recorded voltage fell below the threshold).", ""]
+    if cases:
+        lines += ["| recording | payload [kg] | predicted / recorded after cycle 1 [V] | after cycle 2 [V] | "
+                  "decisions (ours / truth) |", "|---|---|---|---|---|"]
+        for c in cases:
+            dec = "".join("A" if d else "R" for d in c["decisions"])
+            tru = "".join("A" if d else "R" for d in c["truth"])
+            lines.append(f"| {Path(c['recording']).name} | {c['payload_kg']:.0f} | {_fmt(c['predicted_v'][0])} / "
+                         f"{_fmt(c['actual_v'][0])} | {_fmt(c['predicted_v'][1])} / {_fmt(c['actual_v'][1])} | "
+                         f"{dec} / {tru} |")
+        lines.append("")
+    return lines

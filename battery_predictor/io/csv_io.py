@@ -64,7 +64,7 @@ import os
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -233,6 +233,20 @@ def _parse_column(table: _Table, name: str) -> np.ndarray:
 # ---------------------------------------------------------------------------
 
 
+class _Rows(NamedTuple):
+    """One record's rows: 1-based data row numbers, time, voltage, current, temperature column (or None)."""
+
+    rows: np.ndarray
+    t: np.ndarray
+    v: np.ndarray
+    i: np.ndarray
+    temp: np.ndarray | None
+
+    def take(self, keep: np.ndarray) -> _Rows:
+        return _Rows(self.rows[keep], self.t[keep], self.v[keep], self.i[keep],
+                     self.temp[keep] if self.temp is not None else None)
+
+
 def _build(
     table: _Table,
     row_idx: np.ndarray,
@@ -247,16 +261,37 @@ def _build(
     metadata: dict[str, Any],
 ) -> Recording:
     """Validate one record (the table rows ``row_idx``, 0-based) and make a Recording."""
-    rows = row_idx + 1  # 1-based data row numbers
-    t = columns["time_s"][row_idx]
-    v = columns["voltage_V"][row_idx]
-    i = columns["current_A"][row_idx]
-    temp = columns[temp_name][row_idx] if temp_name else None
+    data = _Rows(row_idx + 1, columns["time_s"][row_idx], columns["voltage_V"][row_idx],
+                 columns["current_A"][row_idx], columns[temp_name][row_idx] if temp_name else None)
     meta = dict(metadata)
+    data = _drop_bad_rows(table, row_idx, data, source=source, drop_nan=drop_nan, meta=meta)
+    data = _drop_repeated_times(table, data, source=source, duplicate_times=duplicate_times, meta=meta)
 
-    def where(k: int) -> str:
-        return _where(table, k, rows)
+    def gap_message(k: int, n: int) -> str:
+        return (f"{source}: {_where(table, k, data.rows)}: column {temp_name!r} is empty or non-finite ({n} such "
+                "row(s))" + option_hint("drop_nan", True, "to fill gaps from the nearest measured sample"))
 
+    temperature_k, filled = check_samples(
+        data.t, data.v, data.i, data.temp, source=source, column=str(temp_name), celsius=temp_unit == "C",
+        drop_nan=drop_nan, gap_message=gap_message, expect_discharge=expect_discharge)
+    if filled:
+        meta["filled_temperature_rows"] = filled
+    meta["temperature_column"] = temp_name if temperature_k is not None else None
+    return Recording(
+        time_s=np.ascontiguousarray(data.t),
+        voltage_v=np.ascontiguousarray(data.v),
+        current_a=np.ascontiguousarray(data.i),
+        temperature_k=None if temperature_k is None else np.ascontiguousarray(temperature_k),
+        source=source,
+        metadata=meta,
+    )
+
+
+def _drop_bad_rows(table: _Table, row_idx: np.ndarray, data: _Rows, *, source: str, drop_nan: bool,
+                   meta: dict[str, Any]) -> _Rows:
+    """Rows with an empty or non-finite time/voltage/current or a non-positive voltage: an error, or dropped
+    (counted in ``meta``) with ``drop_nan``."""
+    rows, t, v, i = data.rows, data.t, data.v, data.i
     bad = ~(np.isfinite(t) & np.isfinite(v) & np.isfinite(i))
     if bad.any() and not drop_nan:
         k = int(np.argmax(bad))
@@ -265,56 +300,43 @@ def _build(
         raw = [cells[table.index[c]] if table.index[c] < len(cells) else "" for c in cols]
         what = ", ".join(f"{c}={r.strip()!r}" for c, r in zip(cols, raw))
         raise InputDataError(
-            f"{source}: {where(k)}: empty or non-finite value ({what}); "
+            f"{source}: {_where(table, k, rows)}: empty or non-finite value ({what}); "
             f"{int(bad.sum())} such row(s)" + option_hint("drop_nan", True, "to drop them")
         )
     nonpositive = np.isfinite(v) & (v <= 0)
     if nonpositive.any() and not drop_nan:
         k = int(np.argmax(nonpositive))
         raise InputDataError(
-            f"{source}: {where(k)}: voltage_V {v[k]!r} is not positive "
+            f"{source}: {_where(table, k, rows)}: voltage_V {v[k]!r} is not positive "
             f"({int(nonpositive.sum())} such row(s))" + option_hint("drop_nan", True, "to drop them")
         )
     bad |= nonpositive
-    if bad.any():
-        keep = ~bad
-        meta["dropped_nan_rows"] = int(bad.sum())
-        rows, t, v, i = rows[keep], t[keep], v[keep], i[keep]
-        temp = temp[keep] if temp is not None else None
-        if not len(t):
-            raise InputDataError(f"{source}: no rows left after dropping rows with empty time_s/voltage_V/current_A")
+    if not bad.any():
+        return data
+    meta["dropped_nan_rows"] = int(bad.sum())
+    kept = data.take(~bad)
+    if not len(kept.t):
+        raise InputDataError(f"{source}: no rows left after dropping rows with empty time_s/voltage_V/current_A")
+    return kept
 
+
+def _drop_repeated_times(table: _Table, data: _Rows, *, source: str, duplicate_times: str,
+                         meta: dict[str, Any]) -> _Rows:
+    """Time going backwards: an error; a repeated time: an error, or the first or last row of each kept
+    (``duplicate_times``; counted in ``meta``)."""
+    rows, t = data.rows, data.t
     dt = np.diff(t)
     if (dt < 0).any() or ((dt == 0).any() and duplicate_times == "error"):
         k = int(np.argmax(dt <= 0)) + 1 if duplicate_times == "error" else int(np.argmax(dt < 0)) + 1
         problem = _order_problem(table, t[k], t[k - 1], table.lines[rows[k - 1] - 1], meta)
-        raise InputDataError(f"{source}: {where(k)}: {problem}")
-    if (dt == 0).any():
-        same_next = np.append(dt == 0, False)  # row k has the same time as row k+1
-        same_prev = np.insert(dt == 0, 0, False)  # row k has the same time as row k-1
-        keep = ~same_next if duplicate_times == "keep_last" else ~same_prev
-        meta["dropped_duplicate_time_rows"] = int((~keep).sum())
-        rows, t, v, i = rows[keep], t[keep], v[keep], i[keep]
-        temp = temp[keep] if temp is not None else None
-
-    def gap_message(k: int, n: int) -> str:
-        return (f"{source}: {where(k)}: column {temp_name!r} is empty or non-finite ({n} such row(s))"
-                + option_hint("drop_nan", True, "to fill gaps from the nearest measured sample"))
-
-    temperature_k, filled = check_samples(
-        t, v, i, temp, source=source, column=str(temp_name), celsius=temp_unit == "C", drop_nan=drop_nan,
-        gap_message=gap_message, expect_discharge=expect_discharge)
-    if filled:
-        meta["filled_temperature_rows"] = filled
-    meta["temperature_column"] = temp_name if temperature_k is not None else None
-    return Recording(
-        time_s=np.ascontiguousarray(t),
-        voltage_v=np.ascontiguousarray(v),
-        current_a=np.ascontiguousarray(i),
-        temperature_k=None if temperature_k is None else np.ascontiguousarray(temperature_k),
-        source=source,
-        metadata=meta,
-    )
+        raise InputDataError(f"{source}: {_where(table, k, rows)}: {problem}")
+    if not (dt == 0).any():
+        return data
+    same_next = np.append(dt == 0, False)  # row k has the same time as row k+1
+    same_prev = np.insert(dt == 0, 0, False)  # row k has the same time as row k-1
+    keep = ~same_next if duplicate_times == "keep_last" else ~same_prev
+    meta["dropped_duplicate_time_rows"] = int((~keep).sum())
+    return data.take(keep)
 
 
 def _order_problem(table: _Table, t_now: float, t_prev: float, prev_line: int, meta: dict[str, Any]) -> str:

@@ -59,6 +59,7 @@ if TYPE_CHECKING:
     from battery_predictor.lab.real_pack import PackTrace
     from battery_predictor.params import PackParams
     from battery_predictor.profiles.load_profile import LoadProfile
+    from battery_predictor.profiles.ranger import RangerCurrents, Route
     from battery_predictor.recording import Recording
 
 #: liionpack step period of the real pack in s (= the averaging window, so windows and steps align).
@@ -394,74 +395,139 @@ def run_stepwise(exp: ExperimentSpec, pack: RealPack,
                                 "params initial concentrations (charged)")
 
 
-def run_route(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec) -> tuple[Recording, dict[str, Any]]:
-    """Ranger longest route twice in succession, ending just above 46.31 V at 1.70 A (5.2.4)."""
-    from battery_predictor.profiles import load_ranger_currents, longest_route, route_profile
-    from battery_predictor.simulation.base import SimulationRequest
-    from battery_predictor.simulation.fast import FastPackSimulator
+@dataclass(frozen=True)
+class _RouteCycle:
+    """The route experiment's load: the longest route at a payload and its standstill, cycled."""
 
-    params = pack.base_params
-    threshold = float(params.thresholds.get("route_min_voltage_v", ROUTE_THRESHOLD_V))
+    route: Route
+    currents: RangerCurrents
+    cycle: LoadProfile
+    threshold_v: float
+    standstill_s: float
+    period_s: float
+    two: StepLoad
+    three: StepLoad
+    ends: list[float]
+
+
+@dataclass
+class _RouteSearch:
+    """The start SOC found for the route experiment, and the real-pack run from it."""
+
+    soc: float
+    trace: PackTrace
+    v_real: list[float]
+    iterations: list[dict[str, Any]]
+    seconds: float
+    aim_v: float
+
+
+def _route_cycle(exp: ExperimentSpec, pack: RealPack) -> _RouteCycle:
+    from battery_predictor.profiles import load_ranger_currents, longest_route, route_profile
+
+    threshold = float(pack.base_params.thresholds.get("route_min_voltage_v", ROUTE_THRESHOLD_V))
     currents = load_ranger_currents()
     if exp.payload_kg is None:
         raise SimulationError(f"{exp.name}: a route experiment needs a payload_kg")
     route = longest_route(exp.payload_kg)
     cycle = route_profile(route, currents, seed=exp.profile_seed, mode="sampled")
-    standstill_s = float(cycle.duration_s[-1])
     if cycle.point_labels[-1] != "standstill":
         raise SimulationError(f"{exp.name}: the route profile does not end with a standstill")
     period = cycle.total_duration_s
-    two = StepLoad.from_profile(cycle.repeat(2))
-    three = StepLoad.from_profile(cycle.repeat(3))
-    ends = [period * k for k in (1, 2, 3)]
+    return _RouteCycle(route, currents, cycle, threshold, float(cycle.duration_s[-1]), period,
+                       StepLoad.from_profile(cycle.repeat(2)), StepLoad.from_profile(cycle.repeat(3)),
+                       [period * k for k in (1, 2, 3)])
+
+
+def _cheap_voltage_after_two_cycles(exp: ExperimentSpec, pack: RealPack, rc: _RouteCycle) -> Callable[[float], float]:
+    """Standstill voltage after the second cycle from a start SOC, on the fast simulator with the mean cell."""
+    from battery_predictor.simulation.base import SimulationRequest
+    from battery_predictor.simulation.fast import FastPackSimulator
 
     cheap = FastPackSimulator()
     cheap_params = pack.mean_params()
-    grid = np.arange(0.0, two.end_s - 1e-6, PERIOD_S)
+    grid = np.arange(0.0, rc.two.end_s - 1e-6, PERIOD_S)
 
     def cheap_v2(soc: float) -> float:
         try:
-            res = cheap.simulate(cheap_params, SimulationRequest(load=two, ambient_temperature_k=exp.ambient_temperature_k,
+            res = cheap.simulate(cheap_params, SimulationRequest(load=rc.two, ambient_temperature_k=exp.ambient_temperature_k,
                                                                  initial_soc=soc, output_time_s=grid))
         except SimulationError:
             return -math.inf
         if res.reached_cutoff or len(res.time_s) < len(grid):
             return -math.inf
-        return standstill_voltage_v(res.time_s, res.pack_voltage_v, ends[1], standstill_s)
+        return standstill_voltage_v(res.time_s, res.pack_voltage_v, rc.ends[1], rc.standstill_s)
 
-    aim = threshold + ROUTE_AIM_MARGIN_V
+    return cheap_v2
+
+
+def _search_route_soc(exp: ExperimentSpec, pack: RealPack, rc: _RouteCycle) -> _RouteSearch:
+    """Bisect the start SOC on the fast simulator, verify on the real pack, shift the target until it lands."""
+    cheap_v2 = _cheap_voltage_after_two_cycles(exp, pack, rc)
+    aim = rc.threshold_v + ROUTE_AIM_MARGIN_V
     target = aim
     iterations = []
     seconds = 0.0
-    trace = None
-    soc = float("nan")
     v_real = [math.nan, math.nan, math.nan]
     for _ in range(ROUTE_MAX_ITERATIONS):
         soc, v_cheap, n_eval = bisect_initial_soc(cheap_v2, target, low=0.0, high=1.0)
-        trace = pack.simulate(three, initial_soc=soc, ambient_temperature_k=exp.ambient_temperature_k,
+        trace = pack.simulate(rc.three, initial_soc=soc, ambient_temperature_k=exp.ambient_temperature_k,
                               period_s=PERIOD_S)
         seconds += trace.seconds
         v_real = []
-        for end in ends:
+        for end in rc.ends:
             try:
-                v_real.append(trace.mean_voltage_v(end - standstill_s, end))
+                v_real.append(trace.mean_voltage_v(end - rc.standstill_s, end))
             except SimulationError:
                 v_real.append(math.nan)
         iterations.append({"cheap_target_v": target, "start_soc": soc, "cheap_v_after_cycle2": v_cheap,
                            "cheap_evaluations": n_eval, "real_v_after_cycle2": v_real[1]})
         if not math.isfinite(v_real[1]):
             raise SimulationError(f"{exp.name}: the real pack did not complete two cycles from SOC {soc:.4f}")
-        if threshold + ROUTE_ACCEPT_BAND_V[0] <= v_real[1] <= threshold + ROUTE_ACCEPT_BAND_V[1]:
-            break
+        if rc.threshold_v + ROUTE_ACCEPT_BAND_V[0] <= v_real[1] <= rc.threshold_v + ROUTE_ACCEPT_BAND_V[1]:
+            return _RouteSearch(soc, trace, v_real, iterations, seconds, aim)
         target += aim - v_real[1]
-    else:
-        raise SimulationError(f"{exp.name}: no start SOC within {ROUTE_MAX_ITERATIONS} real-pack runs "
-                              f"(last: {v_real[1]:.3f} V after cycle 2)")
+    raise SimulationError(f"{exp.name}: no start SOC within {ROUTE_MAX_ITERATIONS} real-pack runs "
+                          f"(last: {v_real[1]:.3f} V after cycle 2)")
 
-    rec = measure(trace, instruments, seed=exp.instrument_seed, end_s=ends[1], source=exp.name).recording
-    v_meas = [standstill_voltage_v(rec.time_s, rec.voltage_v, end, standstill_s) for end in ends[:2]]
+
+def _route_truth(rc: _RouteCycle, found: _RouteSearch, v_meas: list[float]) -> dict[str, Any]:
+    """The route experiment's ``truth`` metadata."""
+    threshold, trace, ends, v_real = rc.threshold_v, found.trace, rc.ends, found.v_real
     third_done = bool(trace.time_s[-1] + trace.period_s >= ends[2] - 1e-6)
     further_ok = bool(third_done and math.isfinite(v_real[2]) and v_real[2] >= threshold)
+    return {
+        "threshold_v": threshold,
+        "standstill_current_a": float(rc.currents.standstill_current_a),
+        "standstill_s": rc.standstill_s,
+        "cycle_duration_s": rc.period_s,
+        "cycles": 2,
+        "start_soc": found.soc,
+        "voltage_at_1_70_a_after_cycle_v": v_meas,
+        "voltage_at_1_70_a_after_cycle_noise_free_v": [None if not math.isfinite(x) else x for x in v_real],
+        "second_cycle_ends_above_threshold": bool(v_meas[1] >= threshold),
+        "further_cycle_completed": third_done,
+        "further_cycle_stays_above_threshold": further_ok,
+        "min_voltage_in_further_cycle_v": float(trace.voltage_v[trace.time_s >= ends[1] - 1e-6].min())
+        if np.any(trace.time_s >= ends[1] - 1e-6) else None,
+        **_thermal_summary(trace, ends[1]),
+        "soc_search": {
+            "method": "bisection on the fast single-cell simulator with the real pack's mean cell, "
+                      "verified (and the target shifted) with the real pack",
+            "aim_v": found.aim_v,
+            "accept_band_v": [threshold + ROUTE_ACCEPT_BAND_V[0], threshold + ROUTE_ACCEPT_BAND_V[1]],
+            "iterations": found.iterations,
+        },
+    }
+
+
+def run_route(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec) -> tuple[Recording, dict[str, Any]]:
+    """Ranger longest route twice in succession, ending just above 46.31 V at 1.70 A (5.2.4)."""
+    rc = _route_cycle(exp, pack)
+    found = _search_route_soc(exp, pack, rc)
+    rec = measure(found.trace, instruments, seed=exp.instrument_seed, end_s=rc.ends[1], source=exp.name).recording
+    v_meas = [standstill_voltage_v(rec.time_s, rec.voltage_v, end, rc.standstill_s) for end in rc.ends[:2]]
+    route = rc.route
     meta = {
         "payload_kg": exp.payload_kg,
         "initial_state": "start_soc",
@@ -472,31 +538,9 @@ def run_route(exp: ExperimentSpec, pack: RealPack, instruments: InstrumentSpec) 
             "duration_s": route.duration_s,
             "sections": [dataclasses.asdict(s) for s in route.sections],
         },
-        "profile": {**_profile_record(cycle), "cycles_recorded": 2, "repeated_identically": True},
-        "truth": {
-            "threshold_v": threshold,
-            "standstill_current_a": float(currents.standstill_current_a),
-            "standstill_s": standstill_s,
-            "cycle_duration_s": period,
-            "cycles": 2,
-            "start_soc": soc,
-            "voltage_at_1_70_a_after_cycle_v": v_meas,
-            "voltage_at_1_70_a_after_cycle_noise_free_v": [None if not math.isfinite(x) else x for x in v_real],
-            "second_cycle_ends_above_threshold": bool(v_meas[1] >= threshold),
-            "further_cycle_completed": third_done,
-            "further_cycle_stays_above_threshold": further_ok,
-            "min_voltage_in_further_cycle_v": float(trace.voltage_v[trace.time_s >= ends[1] - 1e-6].min())
-            if np.any(trace.time_s >= ends[1] - 1e-6) else None,
-            **_thermal_summary(trace, ends[1]),
-            "soc_search": {
-                "method": "bisection on the fast single-cell simulator with the real pack's mean cell, "
-                          "verified (and the target shifted) with the real pack",
-                "aim_v": aim,
-                "accept_band_v": [threshold + ROUTE_ACCEPT_BAND_V[0], threshold + ROUTE_ACCEPT_BAND_V[1]],
-                "iterations": iterations,
-            },
-        },
-        "_seconds": seconds,
+        "profile": {**_profile_record(rc.cycle), "cycles_recorded": 2, "repeated_identically": True},
+        "truth": _route_truth(rc, found, v_meas),
+        "_seconds": found.seconds,
     }
     return rec, meta
 

@@ -10,7 +10,9 @@ from typing import Any
 
 from battery_predictor.errors import BagError
 from battery_predictor.io.bags import schema, storage
+from battery_predictor.io.bags.reader import recording_from_messages, time_origin
 from battery_predictor.io.bags.topics import select_topic
+from battery_predictor.recording import Recording
 
 #: Types of the battery input topics a replay plays.
 INPUT_TYPES = (schema.BATTERY_STATE_TYPE, schema.FLOAT64_TYPE, schema.FLOAT32_TYPE, schema.TEMPERATURE_TYPE)
@@ -108,6 +110,21 @@ class ReplayStream:
         if current is not None:
             yield current, group
 
+    def recording(self, *, drop_nan: bool = False) -> Recording:
+        """The stream's battery messages as the recording :func:`~battery_predictor.io.bags.read_recording_bag`
+        reads from the bag (the same decoding, relay pairing and checks), without reading the bag again."""
+        ts = schema.typestore()
+        got: dict[str, list[tuple[int, Any]]] = {}
+        for msg in self.messages:
+            try:
+                decoded = ts.deserialize_cdr(msg.data, msg.msgtype)
+            except Exception as exc:  # noqa: BLE001 - rosbags raises many types on corrupt input
+                raise storage.corrupt(Path(self.source), exc) from None
+            got.setdefault(msg.topic, []).append((msg.log_time_ns, decoded))
+        origin = None if self._origin_ns is None else (self._origin_ns, self._base_s)
+        return recording_from_messages(self.source, self.style, self.battery_topic, got, metadata=self.metadata,
+                                       time_origin=origin, drop_nan=drop_nan)
+
     def counts(self) -> dict[str, int]:
         """Messages per topic."""
         out: dict[str, int] = {}
@@ -164,13 +181,8 @@ def read_replay_stream(path: str | os.PathLike[str], *, topic: str | None = None
     if not messages:
         raise BagError(f"{src}: no messages on {', '.join(sorted(wanted))}")
     messages.sort(key=lambda m: m.log_time_ns)  # stable: keeps voltage, current, temperature order
-    origin = base = None
-    try:
-        origin = int(custom[schema.KEY_ORIGIN_NS])
-        base = float(custom[schema.KEY_BASE_S])
-    except (KeyError, ValueError):
-        pass
+    origin = time_origin(custom)
     return ReplayStream(source=str(src), style=style, battery_topic=name,
                         topics={m.topic: m.msgtype for m in messages}, messages=messages,
-                        metadata=storage.decode_custom(custom), _origin_ns=origin,
-                        _base_s=base if base is not None else 0.0)
+                        metadata=storage.decode_custom(custom), _origin_ns=origin[0] if origin else None,
+                        _base_s=origin[1] if origin else 0.0)

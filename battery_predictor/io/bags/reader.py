@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -83,24 +84,37 @@ def read_recording_bag(
     with open_reader(p) as reader:
         topics = list_topics(reader)
         style, name = select_topic(src, topics, topic)
-        if style == "battery_state":
-            msgs = read_messages(src, reader, {name}, custom)[name]
-            if not msgs:
-                raise BagError(f"{src}: topic {name} has no messages")
-            ns = np.array([_stamp_ns(log, m.header) for log, m in msgs], dtype=np.int64)
-            v = np.array([m.voltage for _, m in msgs], dtype=float)
-            i = np.asarray(battery_state_current_to_internal(np.array([m.current for _, m in msgs], dtype=float)))
-            temp_c = np.array([m.temperature for _, m in msgs], dtype=float)
-            ns, (v, i, temp_c), dup = _sorted_unique(ns, v, i, temp_c)
-            extra = {"dropped_duplicate_stamps": dup}
-            where = name
-        else:
-            names = {name + s for s in RELAY_SUFFIXES.values() if name + s in topics}
-            got = read_messages(src, reader, names, custom)
-            ns, v, i, temp_c, extra = _merge_relay(src, name, got)
-            where = name + "/*"
-    source = str(src)
-    meta = decode_custom(custom)
+        wanted = {name} if style == "battery_state" else {name + s for s in RELAY_SUFFIXES.values() if name + s in topics}
+        got = read_messages(src, reader, wanted, custom)
+    return recording_from_messages(str(src), style, name, got, metadata=decode_custom(custom),
+                                   time_origin=time_origin(custom), drop_nan=drop_nan,
+                                   expect_discharge=expect_discharge)
+
+
+def time_origin(custom: dict[str, str]) -> tuple[int, float] | None:
+    """The bag's time origin (ROS time in ns, recording time in s) from its custom data; None without one."""
+    try:
+        return int(custom[KEY_ORIGIN_NS]), float(custom[KEY_BASE_S])
+    except (KeyError, ValueError):
+        return None
+
+
+def recording_from_messages(source: str, style: str, name: str, got: Mapping[str, list[tuple[int, Any]]], *,
+                            metadata: dict[str, Any], time_origin: tuple[int, float] | None, drop_nan: bool = False,
+                            expect_discharge: bool = False) -> Recording:
+    """A recording from a bag's deserialised battery messages (:func:`read_recording_bag` after reading).
+
+    ``got`` maps each topic (the BatteryState topic ``name``, or the relay topics of the prefix ``name``)
+    to its ``(log_time_ns, message)`` pairs; ``time_origin`` is :func:`time_origin` of the bag; ``metadata``
+    its decoded custom data.
+    """
+    if style == "battery_state":
+        ns, v, i, temp_c, extra = _battery_states(source, name, got.get(name, []))
+        where = name
+    else:
+        ns, v, i, temp_c, extra = _merge_relay(source, name, got)
+        where = name + "/*"
+    meta = dict(metadata)
     extra_meta = {k: val for k, val in extra.items() if val}
 
     bad = ~(np.isfinite(v) & np.isfinite(i)) | (v <= 0)
@@ -117,7 +131,7 @@ def read_recording_bag(
         if not len(ns):
             raise InputDataError(f"{source}: {where}: no samples with a valid voltage and current")
 
-    time_s = _times(ns, custom)
+    time_s = _times(ns, time_origin)
 
     def gap_message(k: int, n: int) -> str:
         return (f"{source}: {where}: sample {k} has no temperature while others do ({n} such sample(s))"
@@ -132,16 +146,27 @@ def read_recording_bag(
     return Recording(time_s=time_s, voltage_v=v, current_a=i, temperature_k=temperature_k, source=source, metadata=meta)
 
 
-def _times(ns: np.ndarray, custom: dict[str, str]) -> np.ndarray:
-    try:
-        origin = int(custom[KEY_ORIGIN_NS])
-        base = float(custom[KEY_BASE_S])
-    except (KeyError, ValueError):
+def _battery_states(source: str, name: str, msgs: list[tuple[int, Any]]
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
+    """The BatteryState messages' (stamps ns, V, A, degC, notes), sorted, the last of each repeated stamp kept."""
+    if not msgs:
+        raise BagError(f"{source}: topic {name} has no messages")
+    ns = np.array([_stamp_ns(log, m.header) for log, m in msgs], dtype=np.int64)
+    v = np.array([m.voltage for _, m in msgs], dtype=float)
+    i = np.asarray(battery_state_current_to_internal(np.array([m.current for _, m in msgs], dtype=float)))
+    temp_c = np.array([m.temperature for _, m in msgs], dtype=float)
+    ns, (v, i, temp_c), dup = _sorted_unique(ns, v, i, temp_c)
+    return ns, v, i, temp_c, {"dropped_duplicate_stamps": dup}
+
+
+def _times(ns: np.ndarray, origin: tuple[int, float] | None) -> np.ndarray:
+    if origin is None:
         return ns.astype(float) / 1e9
-    return base + (ns - origin).astype(float) / 1e9
+    origin_ns, base_s = origin
+    return base_s + (ns - origin_ns).astype(float) / 1e9
 
 
-def _merge_relay(p: Path, prefix: str, got: dict[str, list[tuple[int, Any]]]
+def _merge_relay(p: str, prefix: str, got: Mapping[str, list[tuple[int, Any]]]
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
     """The relay topics' (stamps ns, V, A, degC, notes): each current paired with the nearest voltage."""
     v_msgs = got.get(prefix + RELAY_SUFFIXES["voltage"], [])

@@ -409,87 +409,37 @@ def _run_thermal(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nda
                  duration_s: np.ndarray, current: np.ndarray, edges: np.ndarray, backend: str,
                  table: DiffusivityTemperature, stride: int) -> CellRuns:
     """Thermal cells: particle and temperature recurrence on sub-steps, then the voltage on every boundary."""
-    n_sets, n_steps = z0.shape[0], duration_s.size
-    n_sub = split_steps(duration_s)
-    owner = np.repeat(np.arange(n_steps), n_sub)
-    first = np.concatenate([[0], np.cumsum(n_sub)[:-1]])
-    sub_h = np.repeat(duration_s / n_sub, n_sub)
-    sub_i = current[owner]
-    sub_start = edges[owner] + (np.arange(owner.size) - first[owner]) * sub_h
+    n_sets = z0.shape[0]
+    n_sub, owner, first, sub_h, sub_i, sub_start = _thermal_sub_steps(duration_s, current, edges)
     trace = thermal_recurrence(model, modal, batch.lam, batch.drive, z0, t0, batch.temperature_k, batch.eps_n,
                                batch.eps_p, batch.height_m, sub_h, sub_i, table, heat_rate=batch.heat_rate,
                                stride=stride, backend=backend)
+    steps = _ThermalSteps(start_s=sub_start, duration_s=sub_h, current_a=sub_i, owner=owner, first=first, trace=trace)
     temps = trace.temperature_k
-    if trace.voltages_v is not None:  # the compiled kernel's, PyBaMM's printed voltage expression
-        start_v, end_v = trace.voltages_v  # NaN after each set's end (the kernel stops there)
-    else:
-        start_v = _voltage(model, batch, trace.surfaces[:, :-1], sub_i[None, :], temps[:, :-1])
-        end_v = _voltage(model, batch, trace.surfaces[:, 1:], sub_i[None, :], temps[:, 1:])
+    start_v, end_v = _thermal_voltages(model, batch, trace, sub_i)
     sub_edges = np.append(sub_start, edges[-1])
     cut = model.lower_cutoff_v
     below = (start_v < cut) | (end_v < cut)
     any_below = below.any(axis=1)
     sub_cut = np.where(any_below, below.argmax(axis=1), owner.size)
-    sets = np.arange(n_sets)
-    at_start = any_below & (start_v[sets, np.minimum(sub_cut, owner.size - 1)] < cut)
-    # what must be finite: everything up to each set's end
-    cols = np.arange(owner.size)[None, :]
-    if not (np.all(np.isfinite(start_v[cols <= sub_cut[:, None]]))
-            and np.all(np.isfinite(end_v[cols < (sub_cut + ~at_start)[:, None]]))):
-        raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
-    lo, hi = TABLE_RANGE_K
-    valid_t = temps[np.arange(owner.size + 1)[None, :] <= (sub_cut + ~at_start)[:, None]]
-    if not (np.all(np.isfinite(valid_t)) and np.all((valid_t > lo) & (valid_t < hi))):
-        raise SimulationError(f"the lumped cell temperature left {lo:.0f}..{hi:.0f} K")
-    _check_range(start_v, end_v, sub_edges)
+    at_start = any_below & (start_v[np.arange(n_sets), np.minimum(sub_cut, owner.size - 1)] < cut)
+    _check_thermal_run(start_v, end_v, temps, sub_cut, at_start, sub_edges)
     end_time = np.full(n_sets, edges[-1])
     end_time[at_start] = sub_edges[sub_cut[at_start]]
     final_t = temps[:, -1].copy()
     final_t[at_start] = temps[at_start, sub_cut[at_start]]
-    steps = _ThermalSteps(start_s=sub_start, duration_s=sub_h, current_a=sub_i, owner=owner, first=first, trace=trace)
     z_final = trace.z_end.copy()
     ended = np.nonzero(any_below)[0]
     if ended.size:
-        factors = modal.electrode_factors
-        z_k = _trace_take(trace, ended).states_at(batch.lam[ended], batch.drive[ended], sub_h, sub_i, factors,
-                                                  sub_cut[ended])
+        z_k = _trace_take(trace, ended).states_at(batch.lam[ended], batch.drive[ended], sub_h, sub_i,
+                                                  modal.electrode_factors, sub_cut[ended])
         z_final[ended] = z_k
         inside = np.nonzero(any_below & ~at_start)[0]
         if inside.size:
-            pos = np.searchsorted(ended, inside)
-            k = sub_cut[inside]
-            sub = _take(batch, inside)
-            g = trace.diffusivity_factor[inside, k]
-            lam = sub.lam * factors(g[:, 0], g[:, 1])
-            t_k = temps[inside, k]
-            s_k = trace.surfaces[inside, k]
-            assert model.thermal is not None  # a thermal run
-            # the root is found with the temperature's Euler line inside the step (the voltage moves by
-            # about a millivolt per kelvin; the step's temperature change is a few hundredths of one)
-            r_k = sub.heat_rate * model.thermal.temperature_rate_k_s(s_k[:, 0], s_k[:, 1], sub_i[k], t_k,
-                                                                     sub.temperature_k, sub.eps_n, sub.eps_p,
-                                                                     sub.height_m)
-
-            def euler_temperature(tau: np.ndarray, s_tau: np.ndarray, t_k: np.ndarray = t_k,
-                                  r_k: np.ndarray = r_k) -> np.ndarray:
-                return t_k + tau * r_k
-
-            tau = _cutoff_in_step(model, modal, _Batch(lam, sub.drive, sub.eps_n, sub.eps_p, sub.height_m, t_k),
-                                  z_k[pos], sub_h[k], sub_i[k], temperature_at=euler_temperature)
-            end_time[inside] = sub_start[k] + tau
-            decay, phi = step_coefficients(lam, tau[:, None])
-            z_final[inside] = decay * z_k[pos] + phi * sub.drive * sub_i[k][:, None]
-            final_t[inside] = _temperature_within(model, sub, s_k, z_final[inside] @ modal.surface_weights.T,
-                                                  sub_i[k], t_k, tau)
-    cutoff_step = np.where(any_below, owner[np.minimum(sub_cut, owner.size - 1)], n_steps)
-    # the step-level view: start voltages at each step's first sub-step, end voltages at its last
-    last = first + n_sub - 1
-    step_start_v, step_end_v = start_v[:, first], end_v[:, last]
-    step_at_start = at_start & (sub_cut == first[np.minimum(cutoff_step, n_steps - 1)])
-    cols = np.arange(n_steps)[None, :]
-    first_gone = cutoff_step + np.where(step_at_start, 0, 1)
-    step_start_v = np.where(cols >= first_gone[:, None], np.nan, step_start_v)
-    step_end_v = np.where(cols >= cutoff_step[:, None], np.nan, step_end_v)
+            _thermal_cutoff_inside(model, modal, batch, steps, inside, z_k[np.searchsorted(ended, inside)],
+                                   sub_cut[inside], end_time, z_final, final_t)
+    cutoff_step, step_start_v, step_end_v = _thermal_step_view(steps, n_sub, start_v, end_v, any_below, at_start,
+                                                               sub_cut)
     boundary = np.append(first, owner.size)
     extra = {"backend": f"{trace.backend}-thermal", "batch": batch, "thermal_steps": steps, "model": model,
              "lam": batch.lam, "drive": batch.drive, "stride": stride,
@@ -498,6 +448,96 @@ def _run_thermal(model: LinearSpm, modal: ModalSystem, batch: _Batch, z0: np.nda
     return CellRuns(step_start_s=edges[:-1], start_voltage_v=step_start_v, end_voltage_v=step_end_v,
                     end_time_s=end_time, reached_cutoff=any_below, cutoff_step=cutoff_step,
                     final_state=modal.block_states(z_final), extra=extra)
+
+
+def _thermal_sub_steps(duration_s: np.ndarray, current: np.ndarray,
+                       edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Steps longer than the thermal step split: (sub-steps per step, owning step, first sub-step of each step,
+    sub-step durations, currents and start times)."""
+    n_sub = split_steps(duration_s)
+    owner = np.repeat(np.arange(duration_s.size), n_sub)
+    first = np.concatenate([[0], np.cumsum(n_sub)[:-1]])
+    sub_h = np.repeat(duration_s / n_sub, n_sub)
+    sub_i = current[owner]
+    sub_start = edges[owner] + (np.arange(owner.size) - first[owner]) * sub_h
+    return n_sub, owner, first, sub_h, sub_i, sub_start
+
+
+def _thermal_voltages(model: LinearSpm, batch: _Batch, trace: ThermalTrace,
+                      sub_i: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Voltages at each sub-step's start and end: the compiled kernel's (PyBaMM's printed voltage expression,
+    NaN after each set's end, where the kernel stops) or NumPy's on the trace."""
+    if trace.voltages_v is not None:
+        start_v, end_v = trace.voltages_v
+        return start_v, end_v
+    temps = trace.temperature_k
+    return (_voltage(model, batch, trace.surfaces[:, :-1], sub_i[None, :], temps[:, :-1]),
+            _voltage(model, batch, trace.surfaces[:, 1:], sub_i[None, :], temps[:, 1:]))
+
+
+def _check_thermal_run(start_v: np.ndarray, end_v: np.ndarray, temps: np.ndarray, sub_cut: np.ndarray,
+                       at_start: np.ndarray, sub_edges: np.ndarray) -> None:
+    """SimulationError unless voltages and temperatures are finite (and the temperature in the table's range)
+    up to each set's end, and the voltages within range."""
+    n_sub_steps = start_v.shape[1]
+    cols = np.arange(n_sub_steps)[None, :]
+    if not (np.all(np.isfinite(start_v[cols <= sub_cut[:, None]]))
+            and np.all(np.isfinite(end_v[cols < (sub_cut + ~at_start)[:, None]]))):
+        raise SimulationError("the engine produced non-finite voltages (a particle emptied or filled?)")
+    lo, hi = TABLE_RANGE_K
+    valid_t = temps[np.arange(n_sub_steps + 1)[None, :] <= (sub_cut + ~at_start)[:, None]]
+    if not (np.all(np.isfinite(valid_t)) and np.all((valid_t > lo) & (valid_t < hi))):
+        raise SimulationError(f"the lumped cell temperature left {lo:.0f}..{hi:.0f} K")
+    _check_range(start_v, end_v, sub_edges)
+
+
+def _thermal_cutoff_inside(model: LinearSpm, modal: ModalSystem, batch: _Batch, steps: _ThermalSteps,
+                           inside: np.ndarray, z_k: np.ndarray, k: np.ndarray, end_time: np.ndarray,
+                           z_final: np.ndarray, final_t: np.ndarray) -> None:
+    """The sets ``inside`` meet the cut-off inside sub-step ``k`` (states ``z_k`` at its start): their end time,
+    final states and temperatures, written into ``end_time``, ``z_final`` and ``final_t``."""
+    trace, sub_h, sub_i = steps.trace, steps.duration_s, steps.current_a
+    sub = _take(batch, inside)
+    g = trace.diffusivity_factor[inside, k]
+    lam = sub.lam * modal.electrode_factors(g[:, 0], g[:, 1])
+    t_k = trace.temperature_k[inside, k]
+    s_k = trace.surfaces[inside, k]
+    assert model.thermal is not None  # a thermal run
+    # the root is found with the temperature's Euler line inside the step (the voltage moves by
+    # about a millivolt per kelvin; the step's temperature change is a few hundredths of one)
+    r_k = sub.heat_rate * model.thermal.temperature_rate_k_s(s_k[:, 0], s_k[:, 1], sub_i[k], t_k,
+                                                             sub.temperature_k, sub.eps_n, sub.eps_p,
+                                                             sub.height_m)
+
+    def euler_temperature(tau: np.ndarray, s_tau: np.ndarray, t_k: np.ndarray = t_k,
+                          r_k: np.ndarray = r_k) -> np.ndarray:
+        return t_k + tau * r_k
+
+    tau = _cutoff_in_step(model, modal, _Batch(lam, sub.drive, sub.eps_n, sub.eps_p, sub.height_m, t_k),
+                          z_k, sub_h[k], sub_i[k], temperature_at=euler_temperature)
+    end_time[inside] = steps.start_s[k] + tau
+    decay, phi = step_coefficients(lam, tau[:, None])
+    z_final[inside] = decay * z_k + phi * sub.drive * sub_i[k][:, None]
+    final_t[inside] = _temperature_within(model, sub, s_k, z_final[inside] @ modal.surface_weights.T,
+                                          sub_i[k], t_k, tau)
+
+
+def _thermal_step_view(steps: _ThermalSteps, n_sub: np.ndarray, start_v: np.ndarray, end_v: np.ndarray,
+                       any_below: np.ndarray, at_start: np.ndarray,
+                       sub_cut: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The step-level view: the cut-off step, start voltages at each step's first sub-step and end voltages at
+    its last, NaN from the cut-off on."""
+    owner, first = steps.owner, steps.first
+    n_steps = first.size
+    cutoff_step = np.where(any_below, owner[np.minimum(sub_cut, owner.size - 1)], n_steps)
+    last = first + n_sub - 1
+    step_start_v, step_end_v = start_v[:, first], end_v[:, last]
+    step_at_start = at_start & (sub_cut == first[np.minimum(cutoff_step, n_steps - 1)])
+    cols = np.arange(n_steps)[None, :]
+    first_gone = cutoff_step + np.where(step_at_start, 0, 1)
+    step_start_v = np.where(cols >= first_gone[:, None], np.nan, step_start_v)
+    step_end_v = np.where(cols >= cutoff_step[:, None], np.nan, step_end_v)
+    return cutoff_step, step_start_v, step_end_v
 
 
 def _temperature_within(model: LinearSpm, batch: _Batch, s_k: np.ndarray, s_tau: np.ndarray, current_a: npt.ArrayLike,
