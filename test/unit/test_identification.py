@@ -42,15 +42,13 @@ SHIPPED = [REPO / "params" / f"{name}.yaml" for name in ("temi", "ranger_mini", 
 
 @pytest.fixture(scope="module")
 def panasonic():
-    """The shipped Panasonic cell without its cold-window prior (extension ``temperature``).
+    """The shipped Panasonic cell, with its cold-window prior (extension ``temperature``).
 
-    These tests identify synthetic recordings at 298.15 K, where the prior changes nothing (the
-    residuals agree to 1e-15 V with and without it), but the trust-region refinement from a start
-    near the truth is path-sensitive at that level: with the prior's extra expression nodes it stopped
-    at a 16-20 % higher cost after 82-102 of 120 evaluations on the same residuals (2026-11-26).
+    Until the engine keyed its extraction on the window's anchors these tests needed the prior
+    stripped: the anchors of the first candidate were baked into later ones, and the refinement from
+    a start near the truth stopped at a 16-20 % higher cost (docs/identification.md).
     """
-    params = load_params(REPO / "params" / "panasonic_18650pf.yaml")
-    return dataclasses.replace(params, extensions=(), extra={})
+    return load_params(REPO / "params" / "panasonic_18650pf.yaml")
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
