@@ -63,18 +63,37 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
     domain), shut down after the replay unless given.
     """
     from battery_predictor.cli._ros_params import check_node_params_file
-    from battery_predictor.cli.common import check_output_dir, progress_wanted, replay_progress
+    from battery_predictor.cli.common import check_output_dir
     from battery_predictor.errors import InputDataError
     from battery_predictor.nodes.client import isolated_context, ros_context
-    from battery_predictor.nodes.replay_run import replay_into_nodes
     from battery_predictor.nodes.replay_session import default_output_dir
-    from battery_predictor.replay import error_summary, read_replay_stream
+    from battery_predictor.replay import read_replay_stream
 
     pack_params = check_node_params_file(params, pack=pack)
     if not (rate >= 0 and not math.isnan(rate)):
         raise InputDataError(f"--rate is {rate} (must be >= 0)")
     out = check_output_dir(out_dir or default_output_dir(bag), "--out")
     stream = read_replay_stream(bag)
+    bag_out, png = _prepared_output(out, overwrite)
+    overrides: dict[str, Any] = {}
+    if pack:
+        overrides["params_file"] = str(pack)
+    if runtime_period_s is not None:
+        overrides["runtime_period_s"] = float(runtime_period_s)
+    own = isolated_context() if context is None and not shared_domain else None
+    try:
+        with ros_context(context or own) as context:
+            result = _run(stream, context, bag, params, pack_params, bag_out, png, rate, overrides, quiet)
+    finally:
+        if own is not None:
+            own.try_shutdown()
+    return _summary(stream, result, bag_out, png)
+
+
+def _prepared_output(out: Path, overwrite: bool) -> tuple[Path, Path]:
+    """The output bag and plot paths in ``out``; an existing output bag is removed only with ``overwrite``."""
+    from battery_predictor.errors import InputDataError
+
     bag_out, png = out / "outputs", out / "remaining_runtime.png"
     if bag_out.exists():
         if not overwrite:
@@ -83,31 +102,33 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
             raise InputDataError(f"{bag_out}: exists and is not a bag; not removing it")
         shutil.rmtree(bag_out)
     out.mkdir(parents=True, exist_ok=True)
-    overrides: dict[str, Any] = {}
-    if pack:
-        overrides["params_file"] = str(pack)
-    if runtime_period_s is not None:
-        overrides["runtime_period_s"] = float(runtime_period_s)
-    name = Path(stream.source).name
-    title = f"{name}: remaining runtime"
+    return bag_out, png
 
-    own = isolated_context() if context is None and not shared_domain else None
-    try:
-        with ros_context(context or own) as context:
-            if not quiet:
-                print(f"replay: {stream.source}: {stream.style} topics {', '.join(stream.topics)}, "
-                      f"{len(stream.messages)} messages over {stream.duration_s / 60:.1f} min"
-                      + (f", at most {rate:g}x" if rate > 0 else ", as fast as possible"), flush=True)
-            result = replay_into_nodes(
-                stream, context=context, params_file=params, out_bag=bag_out, plot=png, plot_title=title, rate=rate,
-                bag_metadata={"replay_of": str(bag), "params": str(params), "rate": rate}, overrides=overrides,
-                progress=lambda end_ns: replay_progress(stream, end_ns, "replay", enabled=not quiet and progress_wanted()),
-                truth_from_points=lambda points: measured_truth(stream, pack_params, points))
-    finally:
-        if own is not None:
-            own.try_shutdown()
+
+def _run(stream: ReplayStream, context: Context | None, bag: str, params: str, pack_params: PackParams | None,
+         bag_out: Path, png: Path, rate: float, overrides: dict[str, Any], quiet: bool) -> Any:
+    """Feed ``stream`` into the nodes on ``context`` (None: rclpy's global one); the replay's result."""
+    from battery_predictor.cli.common import progress_wanted, replay_progress
+    from battery_predictor.nodes.replay_run import replay_into_nodes
+
+    if not quiet:
+        print(f"replay: {stream.source}: {stream.style} topics {', '.join(stream.topics)}, "
+              f"{len(stream.messages)} messages over {stream.duration_s / 60:.1f} min"
+              + (f", at most {rate:g}x" if rate > 0 else ", as fast as possible"), flush=True)
+    return replay_into_nodes(
+        stream, context=context, params_file=params, out_bag=bag_out, plot=png,
+        plot_title=f"{Path(stream.source).name}: remaining runtime", rate=rate,
+        bag_metadata={"replay_of": str(bag), "params": str(params), "rate": rate}, overrides=overrides,
+        progress=lambda end_ns: replay_progress(stream, end_ns, "replay", enabled=not quiet and progress_wanted()),
+        truth_from_points=lambda points: measured_truth(stream, pack_params, points))
+
+
+def _summary(stream: ReplayStream, result: Any, bag_out: Path, png: Path) -> dict:
+    """The JSON summary of a finished replay."""
+    from battery_predictor.replay import error_summary
+
     stats, points, truth, checkpoints = result.stats, result.points, result.truth, result.checkpoints
-    summary = {
+    return {
         "bag": stream.source,
         "output_bag": str(bag_out),
         "plot": str(png),
@@ -127,7 +148,6 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
                         for c in checkpoints],
         "errors": error_summary(checkpoints) if checkpoints else None,
     }
-    return summary
 
 
 def measured_truth(stream: ReplayStream, pack_params: PackParams | None,
