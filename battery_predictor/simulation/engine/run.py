@@ -149,6 +149,16 @@ class _Batch:
     heat_rate: np.ndarray | None = None
 
 
+def batch_arrays(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: int,
+                 temperature_k: npt.ArrayLike) -> _Batch:
+    """The per-set arrays :func:`run_cells` computes from ``sets`` and ``temperature_k`` for ``n_sets`` sets.
+
+    A caller that runs the same sets at the same temperature many times (``EnginePack``: every route
+    answer) computes them once and passes them as ``run_cells(..., batch=...)``.
+    """
+    return _batch(model, modal, sets, n_sets, temperature_k)
+
+
 def _batch(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: int,
            temperature_k: npt.ArrayLike) -> _Batch:
     f = sets.arrays(n_sets)
@@ -204,7 +214,8 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, c
               c_p0_mol_m3: npt.ArrayLike | None = None, temperature_k: npt.ArrayLike, sets: ParameterSets | None = None, backend: str = "auto",
               keep_states: bool = False, initial_state: tuple[np.ndarray, np.ndarray] | None = None,
               initial_temperature_k: npt.ArrayLike | None = None,
-              diffusivity_temperature: DiffusivityTemperature | None = None) -> CellRuns:
+              diffusivity_temperature: DiffusivityTemperature | None = None,
+              batch: _Batch | None = None) -> CellRuns:
     """Run cells from uniform particles through constant-current steps until the cut-off.
 
     Parameters
@@ -234,6 +245,10 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, c
     keep_states : bool
         Keep the modal state at every step boundary (for :func:`voltages_at_times`); this runs the
         recurrence and the voltage in two passes.
+    batch : optional
+        ``batch_arrays(model, modal, sets, n_sets, temperature_k)`` of exactly these ``sets`` and
+        ``temperature_k``, computed once by a caller that repeats them (recomputed when its number of
+        sets does not match).
 
     Returns
     -------
@@ -257,7 +272,8 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, c
     n_state_sets = 1 if initial_state is None else max(np.atleast_2d(y).shape[0] for y in initial_state)
     n_sets = max(sets.size(), np.size(c_n0_mol_m3 if c_n0_mol_m3 is not None else 0.0),
                  np.size(c_p0_mol_m3 if c_p0_mol_m3 is not None else 0.0), np.size(temperature_k), n_state_sets)
-    batch = _batch(model, modal, sets, n_sets, temperature_k)
+    if batch is None or batch.lam.shape[0] != n_sets:
+        batch = _batch(model, modal, sets, n_sets, temperature_k)
     if initial_state is None:
         c_max_n = model.blocks[0].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_n, dtype=float), (n_sets,))
         c_max_p = model.blocks[1].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_p, dtype=float), (n_sets,))
@@ -317,6 +333,8 @@ def _run_fused(kernel: Kernel, model: LinearSpm, modal: ModalSystem, batch: _Bat
 
 def _check_range(start_v: np.ndarray, end_v: np.ndarray, edges: np.ndarray) -> None:
     """Raise when a cell voltage left the physical range (see :data:`MAX_CELL_VOLTAGE_V`)."""
+    if not ((start_v > MAX_CELL_VOLTAGE_V).any() or (end_v > MAX_CELL_VOLTAGE_V).any()):
+        return  # the common case, in two comparisons (NaN compares False, as NaN -> 0 did below)
     high = (np.nan_to_num(start_v, nan=0.0) > MAX_CELL_VOLTAGE_V) | (np.nan_to_num(end_v, nan=0.0) > MAX_CELL_VOLTAGE_V)
     if high.any():
         step = int(np.argmax(high.any(axis=0)))
