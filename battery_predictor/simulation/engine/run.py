@@ -262,7 +262,7 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, c
     current = np.asarray(cell_current_a, dtype=float)
     if duration_s.ndim != 1 or duration_s.shape != current.shape or duration_s.size == 0:
         raise SimulationError("steps: durations and currents must be 1-D of equal non-zero length")
-    if not (np.all(np.isfinite(duration_s)) and np.all(duration_s > 0) and np.all(np.isfinite(current))):
+    if not (np.isfinite(duration_s).all() and (duration_s > 0).all() and np.isfinite(current).all()):
         raise SimulationError("steps: durations must be finite and > 0 s, currents finite")
     if backend not in ("auto", "numba", "numpy"):
         raise SimulationError(f"unknown engine backend '{backend}' (auto, numba or numpy)")
@@ -270,7 +270,8 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, c
     if (initial_state is None) == (c_n0_mol_m3 is None or c_p0_mol_m3 is None):
         raise SimulationError("give either both initial concentrations or an initial state")
     n_state_sets = 1 if initial_state is None else max(np.atleast_2d(y).shape[0] for y in initial_state)
-    n_sets = max(sets.size(), np.size(c_n0_mol_m3 if c_n0_mol_m3 is not None else 0.0),
+    n_sets = max(batch.lam.shape[0] if batch is not None else sets.size(),  # a given batch was made of these sets
+                 np.size(c_n0_mol_m3 if c_n0_mol_m3 is not None else 0.0),
                  np.size(c_p0_mol_m3 if c_p0_mol_m3 is not None else 0.0), np.size(temperature_k), n_state_sets)
     if batch is None or batch.lam.shape[0] != n_sets:
         batch = _batch(model, modal, sets, n_sets, temperature_k)
