@@ -221,9 +221,12 @@ def main() -> int:
         result["targets"][name] = {"segments": _segments(client[1:], server[1:]),
                                    "overlaps": _overlaps(server[1:], busy),
                                    "distinct_answers": len(answers[name]),
-                                   "answer": [list(a) for a in sorted(answers[name])][:3]}
-    if args.json:
+                                   "answer": [list(a) for a in sorted(answers[name])][:3],
+                                   "raw": {"client": client, "server": server, "busy": busy}}
+    if args.json:  # with every call's timestamps ("raw")
         Path(args.json).write_text(json.dumps(result))
+    for data in result["targets"].values():
+        del data["raw"]
     print(f"load average (1, 5, 15 min) before {load[0]}, after {load[-1] if len(load) > 1 else '?'}")
     for name, data in result["targets"].items():
         print(f"\n{name} ({variants and dict(variants).get(name, '')}): {data['distinct_answers']} distinct answer(s)")
