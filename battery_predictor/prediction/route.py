@@ -99,7 +99,8 @@ def rejected(reason: str, threshold_v: float, *, duration_s: float = math.nan, c
 
 def evaluate_route(runner: PackModel, start: RunStart, sections: Sequence[RouteSection],
                    temperature_k: float, *, threshold_v: float, standstill_current_a: float,
-                   currents: RangerCurrents | None = None, settle_s: float = SETTLE_S) -> RouteDecision:
+                   currents: RangerCurrents | None = None, settle_s: float = SETTLE_S,
+                   segments: list[tuple[float, float]] | None = None) -> RouteDecision:
     """Simulate a route from ``start`` and decide (never raises for a bad route: rejects with a reason).
 
     Parameters
@@ -114,12 +115,15 @@ def evaluate_route(runner: PackModel, start: RunStart, sections: Sequence[RouteS
         Temperature assumed, K.
     threshold_v, standstill_current_a : float
         Acceptance threshold (V) and the standstill current (A) it applies at.
+    segments : list, optional
+        ``route_segments(sections, standstill_current_a, currents)`` when the caller has them already.
     """
     soc = float(start) if isinstance(start, (int, float)) else runner.soc_of(start)
-    try:
-        segments = route_segments(sections, standstill_current_a, currents)
-    except BatteryPredictorError as exc:
-        return rejected(f"invalid route: {exc}", threshold_v, soc=soc)
+    if segments is None:
+        try:
+            segments = route_segments(sections, standstill_current_a, currents)
+        except BatteryPredictorError as exc:
+            return rejected(f"invalid route: {exc}", threshold_v, soc=soc)
     duration_s = sum(d for d, _ in segments)
     charge_ah = sum(d * i for d, i in segments) / 3600.0
     if duration_s > MAX_ROUTE_DURATION_S:

@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from battery_predictor.errors import BatteryPredictorError
-from battery_predictor.prediction.route import RouteDecision, evaluate_route
+from battery_predictor.prediction.route import RouteDecision, evaluate_route, route_segments
 from battery_predictor.prediction.runtime import demand_run, load_horizon_s, run_end_s
 from battery_predictor.profiles.ranger import DEFAULT_POINT_DURATION_S, std_current_a
 
@@ -523,14 +523,19 @@ def evaluate_route_at_risk(runner: PackModel, start: RunStart, sections: Sequenc
     ``risk`` 0.5 decides on the P50 voltage alone (the paper's rule); the default 0.1 accepts when
     the P10 voltage after the route is at or above the threshold. Never raises for a bad route.
     """
+    try:  # once for the three runs (an invalid route: evaluate_route rejects it with the reason)
+        segments: list[tuple[float, float]] | None = route_segments(sections, standstill_current_a, currents)
+    except BatteryPredictorError:
+        segments = None
     decision = evaluate_route(runner, start, sections, temperature_k, threshold_v=threshold_v,
-                              standstill_current_a=standstill_current_a, currents=currents)
+                              standstill_current_a=standstill_current_a, currents=currents, segments=segments)
     if not math.isfinite(decision.predicted_voltage_v):
         return decision
 
     def end_voltage_at(temp_k: float) -> float:
         return evaluate_route(runner, start, sections, temp_k, threshold_v=threshold_v,
-                              standstill_current_a=standstill_current_a, currents=currents).predicted_voltage_v
+                              standstill_current_a=standstill_current_a, currents=currents,
+                              segments=segments).predicted_voltage_v
 
     soc = decision.state_of_charge
     end_soc = soc - decision.route_charge_ah / runner.capacity_ah

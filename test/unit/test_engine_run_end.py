@@ -64,3 +64,25 @@ def test_run_end_with_an_arrhenius_series_resistance(ranger_params, longest_rout
 def test_run_end_of_thermal_cells_is_the_end_of_their_run(ranger_params, longest_route_segments):
     pack = EnginePack(replace(ranger_params, options={"thermal": "lumped"}))
     _same_end(pack, 0.4, longest_route_segments, 288.15)
+
+
+def test_cached_per_temperature_arrays_give_the_same_answers(ranger_params, longest_route_segments):
+    """EnginePack keeps the kernel's per-set arrays per temperature (route answers repeat a few): the
+    runs with them are bit-identical to runs that compute them afresh, and the cached arrays are read-only."""
+    import numpy as np
+
+    from battery_predictor.simulation.extensions import weak_group_fraction
+
+    params = ranger_params.with_values({"Weak series group capacity fraction": 0.8}, extensions=("cell_imbalance",))
+    for pack in (EnginePack(ranger_params), EnginePack(params, weak_fraction=weak_group_fraction(params))):
+        state = pack.run(0.6, [(300.0, 2.0)], 297.15).final_state
+        for temperature_k in (297.15, 290.0, 297.15):
+            cached = pack.run_end(state, longest_route_segments, temperature_k)
+            run = pack.run(state, longest_route_segments, temperature_k)
+            pack._sets.clear()  # the next runs compute the arrays afresh
+            assert pack.run_end(state, longest_route_segments, temperature_k) == cached
+            fresh = pack.run(state, longest_route_segments, temperature_k)
+            assert np.array_equal(fresh.pack_voltage_v, run.pack_voltage_v)
+            assert fresh.end_time_s == run.end_time_s
+        _sets, batch = pack._sets_at(297.15)
+        assert not batch.lam.flags.writeable and not batch.drive.flags.writeable

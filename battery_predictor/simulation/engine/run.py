@@ -149,6 +149,16 @@ class _Batch:
     heat_rate: np.ndarray | None = None
 
 
+def batch_arrays(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: int,
+                 temperature_k: npt.ArrayLike) -> _Batch:
+    """The per-set arrays :func:`run_cells` computes from ``sets`` and ``temperature_k`` for ``n_sets`` sets.
+
+    A caller that runs the same sets at the same temperature many times (``EnginePack``: every route
+    answer) computes them once and passes them as ``run_cells(..., batch=...)``.
+    """
+    return _batch(model, modal, sets, n_sets, temperature_k)
+
+
 def _batch(model: LinearSpm, modal: ModalSystem, sets: ParameterSets, n_sets: int,
            temperature_k: npt.ArrayLike) -> _Batch:
     f = sets.arrays(n_sets)
@@ -204,7 +214,8 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, c
               c_p0_mol_m3: npt.ArrayLike | None = None, temperature_k: npt.ArrayLike, sets: ParameterSets | None = None, backend: str = "auto",
               keep_states: bool = False, initial_state: tuple[np.ndarray, np.ndarray] | None = None,
               initial_temperature_k: npt.ArrayLike | None = None,
-              diffusivity_temperature: DiffusivityTemperature | None = None) -> CellRuns:
+              diffusivity_temperature: DiffusivityTemperature | None = None,
+              batch: _Batch | None = None) -> CellRuns:
     """Run cells from uniform particles through constant-current steps until the cut-off.
 
     Parameters
@@ -234,6 +245,10 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, c
     keep_states : bool
         Keep the modal state at every step boundary (for :func:`voltages_at_times`); this runs the
         recurrence and the voltage in two passes.
+    batch : optional
+        ``batch_arrays(model, modal, sets, n_sets, temperature_k)`` of exactly these ``sets`` and
+        ``temperature_k``, computed once by a caller that repeats them (recomputed when its number of
+        sets does not match).
 
     Returns
     -------
@@ -247,7 +262,7 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, c
     current = np.asarray(cell_current_a, dtype=float)
     if duration_s.ndim != 1 or duration_s.shape != current.shape or duration_s.size == 0:
         raise SimulationError("steps: durations and currents must be 1-D of equal non-zero length")
-    if not (np.all(np.isfinite(duration_s)) and np.all(duration_s > 0) and np.all(np.isfinite(current))):
+    if not (np.isfinite(duration_s).all() and (duration_s > 0).all() and np.isfinite(current).all()):
         raise SimulationError("steps: durations must be finite and > 0 s, currents finite")
     if backend not in ("auto", "numba", "numpy"):
         raise SimulationError(f"unknown engine backend '{backend}' (auto, numba or numpy)")
@@ -255,9 +270,11 @@ def run_cells(model: LinearSpm, modal: ModalSystem, duration_s: npt.ArrayLike, c
     if (initial_state is None) == (c_n0_mol_m3 is None or c_p0_mol_m3 is None):
         raise SimulationError("give either both initial concentrations or an initial state")
     n_state_sets = 1 if initial_state is None else max(np.atleast_2d(y).shape[0] for y in initial_state)
-    n_sets = max(sets.size(), np.size(c_n0_mol_m3 if c_n0_mol_m3 is not None else 0.0),
+    n_sets = max(batch.lam.shape[0] if batch is not None else sets.size(),  # a given batch was made of these sets
+                 np.size(c_n0_mol_m3 if c_n0_mol_m3 is not None else 0.0),
                  np.size(c_p0_mol_m3 if c_p0_mol_m3 is not None else 0.0), np.size(temperature_k), n_state_sets)
-    batch = _batch(model, modal, sets, n_sets, temperature_k)
+    if batch is None or batch.lam.shape[0] != n_sets:
+        batch = _batch(model, modal, sets, n_sets, temperature_k)
     if initial_state is None:
         c_max_n = model.blocks[0].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_n, dtype=float), (n_sets,))
         c_max_p = model.blocks[1].scale_mol_m3 * np.broadcast_to(np.asarray(sets.c_max_p, dtype=float), (n_sets,))
@@ -317,6 +334,8 @@ def _run_fused(kernel: Kernel, model: LinearSpm, modal: ModalSystem, batch: _Bat
 
 def _check_range(start_v: np.ndarray, end_v: np.ndarray, edges: np.ndarray) -> None:
     """Raise when a cell voltage left the physical range (see :data:`MAX_CELL_VOLTAGE_V`)."""
+    if not ((start_v > MAX_CELL_VOLTAGE_V).any() or (end_v > MAX_CELL_VOLTAGE_V).any()):
+        return  # the common case, in two comparisons (NaN compares False, as NaN -> 0 did below)
     high = (np.nan_to_num(start_v, nan=0.0) > MAX_CELL_VOLTAGE_V) | (np.nan_to_num(end_v, nan=0.0) > MAX_CELL_VOLTAGE_V)
     if high.any():
         step = int(np.argmax(high.any(axis=0)))

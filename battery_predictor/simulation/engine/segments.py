@@ -37,6 +37,7 @@ from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resi
 from battery_predictor.simulation.engine.run import (
     CellRuns,
     ParameterSets,
+    batch_arrays,
     run_cells,
     set_surfaces_at_times,
     set_voltage_v,
@@ -190,6 +191,7 @@ class EnginePack:
         pv = prepared_parameter_values(params)
         self._pv = pv
         self._diffusivity_factors: dict[float, tuple[float, float]] = {}
+        self._sets: dict[float, tuple[ParameterSets, Any]] = {}
         self._tables: dict[float, DiffusivityTemperature] = {}
         self.window = StoichiometryWindow(self.model, pv)
         if self.model.thermal is None:  # refuse diffusivities that depend on the stoichiometry away from the build
@@ -261,9 +263,25 @@ class EnginePack:
         if not np.isfinite(temperature_k) or not 200.0 < temperature_k < 400.0:
             raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
         cell_a = (pack_a - self.current_offset_a) / self.params.parallel
-        f_n, f_p = self._diffusivity_factors_at(float(temperature_k))
-        sets = ParameterSets(height=self._heights, diffusivity_n=f_n, diffusivity_p=f_p)
-        return duration_s, pack_a, cell_a, dict(temperature_k=float(temperature_k), backend=self.backend, sets=sets)
+        sets, batch = self._sets_at(float(temperature_k))
+        return duration_s, pack_a, cell_a, dict(temperature_k=float(temperature_k), backend=self.backend, sets=sets,
+                                                batch=batch)
+
+    def _sets_at(self, temperature_k: float) -> tuple[ParameterSets, Any]:
+        """The groups' parameter sets at ``temperature_k`` and the kernel's per-set arrays of them (cached per
+        temperature: a route answer runs the same few temperatures every time)."""
+        cached = self._sets.get(temperature_k)
+        if cached is None:
+            if len(self._sets) > 64:
+                self._sets.clear()
+            f_n, f_p = self._diffusivity_factors_at(temperature_k)
+            sets = ParameterSets(height=self._heights, diffusivity_n=f_n, diffusivity_p=f_p)
+            batch = batch_arrays(self.model, self.modal, sets, self._heights.size, temperature_k)
+            for value in vars(batch).values():  # shared by every run at this temperature: never written
+                if isinstance(value, np.ndarray):
+                    value.flags.writeable = False
+            cached = self._sets[temperature_k] = (sets, batch)
+        return cached
 
     def _run_cells(self, start: float | EngineState, duration_s: np.ndarray, cell_a: np.ndarray,
                    common: dict[str, Any]) -> CellRuns:
