@@ -53,7 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="identify: refinements from the best distinct TPE candidates (default 3)")
     p.add_argument("--coordinates", nargs="+", default=(), metavar="NAME",
                    help="identify: optional coordinates to search as well (negative_diffusivity_m2_s, "
-                        "positive_diffusivity_m2_s)")
+                        "positive_diffusivity_m2_s, negative_kinetic_scale, positive_kinetic_scale; with the "
+                        "hysteresis extension hysteresis_relaxation_rate_s, hysteresis_activation_energy_j_mol)")
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
                    help="average the data over windows of this many seconds first (as the battery monitor does)")
     p.add_argument("--trials", type=int, default=None, help="tpe: total TPE trials (default 1000)")

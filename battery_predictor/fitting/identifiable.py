@@ -20,6 +20,10 @@ hysteresis_half_width_v    lin    with the ``hysteresis`` extension: its half-wi
                                   :data:`HYSTERESIS_HALF_WIDTH_RANGE_V`
 hysteresis_decay_rate      log    with the ``hysteresis`` extension: its rate ``K`` (per unit charge of the
                                   positive electrode), searched in :data:`HYSTERESIS_DECAY_RANGE`
+hysteresis_relaxation_     log    optional, with the ``hysteresis`` extension: the rate (1/s) at which its
+rate_s                            state relaxes towards 0 (:data:`HYSTERESIS_RELAX_RANGE_S`)
+hysteresis_activation_     lin    optional, with the ``hysteresis`` extension: the activation energy of its
+energy_j_mol                      half-width (:data:`HYSTERESIS_ACTIVATION_RANGE_J_MOL`)
 initial_ocv_v:<k>          lin    open-circuit cell voltage at the start of recording ``k`` (state)
 ========================== ====== ===================================================================
 
@@ -91,7 +95,7 @@ CORE_COORDINATES = ("negative_capacity_ah", "positive_capacity_ah", "negative_st
 #: Negative stoichiometry at the start of the first recording: searched within this range.
 NEGATIVE_STOICHIOMETRY_RANGE = (0.2, 0.999)
 OPTIONAL_COORDINATES = ("negative_diffusivity_m2_s", "positive_diffusivity_m2_s", "negative_kinetic_scale",
-                        "positive_kinetic_scale")
+                        "positive_kinetic_scale", "hysteresis_relaxation_rate_s", "hysteresis_activation_energy_j_mol")
 _ELECTRODES = {"negative": "Negative", "positive": "Positive"}
 _DIFFUSIVITY_KEYS = {"negative_diffusivity_m2_s": "Negative particle diffusivity [m2.s-1]",
                      "positive_diffusivity_m2_s": "Positive particle diffusivity [m2.s-1]"}
@@ -105,6 +109,17 @@ HYSTERESIS_DECAY_RANGE = (1.0, 1.0e4)
 _HYSTERESIS_KEYS = {"hysteresis_half_width_v": "Positive electrode OCP hysteresis half-width [V]",
                     "hysteresis_decay_rate": "Positive particle hysteresis decay rate [-]"}
 HYSTERESIS_COORDINATES = tuple(_HYSTERESIS_KEYS)
+#: Search range of the hysteresis relaxation rate (1/s, log scale): a time constant from 10 s to about 28 h
+#: (the low end is the params' value 0, no relaxation, for the start).
+HYSTERESIS_RELAX_RANGE_S = (1.0e-5, 1.0e-1)
+#: Search range of the activation energy of the hysteresis half-width (J/mol, linear).
+HYSTERESIS_ACTIVATION_RANGE_J_MOL = (0.0, 80000.0)
+#: Optional hysteresis coordinates -> (extension key, search range, log scale).
+_HYSTERESIS_OPTIONAL = {
+    "hysteresis_relaxation_rate_s": ("Positive electrode hysteresis relaxation rate [s-1]", HYSTERESIS_RELAX_RANGE_S, True),
+    "hysteresis_activation_energy_j_mol": ("Positive electrode OCP hysteresis half-width activation energy [J.mol-1]",
+                                           HYSTERESIS_ACTIVATION_RANGE_J_MOL, False),
+}
 
 
 @dataclass(frozen=True)
@@ -275,6 +290,9 @@ def default_space(params: PackParams, recordings: Sequence[Recording] = (),
             _check_kinetic_scalable(params, name)
             space.append(Coordinate(name, 1.0, *KINETIC_SCALE_RANGE, True))
             continue
+        if name in _HYSTERESIS_OPTIONAL:
+            space.append(_hysteresis_optional_coordinate(params, name))
+            continue
         if name not in shipped:
             raise ParamsError(f"{params.source}: {_DIFFUSIVITY_KEYS[name]} is a function in "
                               f"{params.base_parameter_set}; it cannot be searched as a scalar")
@@ -287,6 +305,16 @@ def default_space(params: PackParams, recordings: Sequence[Recording] = (),
                               log=True))
     space.extend(initial_ocv_coordinates(params, recordings))
     return space
+
+
+def _hysteresis_optional_coordinate(params: PackParams, name: str) -> Coordinate:
+    """The optional hysteresis coordinate ``name``, starting from the params' value (clipped into its range)."""
+    from battery_predictor.simulation.extensions import extension_value
+
+    if "hysteresis" not in params.extensions:
+        raise ParamsError(f"{params.source}: {name} needs the hysteresis extension (extensions: [hysteresis])")
+    key, (low, high), log = _HYSTERESIS_OPTIONAL[name]
+    return Coordinate(name, min(max(extension_value(params, key), low), high), low, high, log)
 
 
 def _check_kinetic_scalable(params: PackParams, name: str) -> None:
@@ -408,6 +436,9 @@ def pybamm_values(params: PackParams, coordinates: Mapping[str, float], n_record
     for name, key in _HYSTERESIS_KEYS.items():
         if name in coordinates:
             shared[key] = c[name]
+    for name, (key, _, _) in _HYSTERESIS_OPTIONAL.items():
+        if name in coordinates:
+            shared[key] = float(coordinates[name])
     x_0, y_0 = _first_state(params, basis, c, shipped, "initial_ocv_v:0" in c)
     q_li_ah = x_0 * c["negative_capacity_ah"] + y_0 * c["positive_capacity_ah"]
     out = []

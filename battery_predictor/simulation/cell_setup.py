@@ -15,6 +15,7 @@ from battery_predictor.errors import SimulationError
 from battery_predictor.params import PackParams
 from battery_predictor.simulation.extensions import (
     THERMAL_DEFAULTS,
+    apply_extension_model,
     apply_extension_parameter_values,
     cooling_area_m2,
     extension_model_options,
@@ -102,6 +103,7 @@ def build_model(params: PackParams, *, for_liionpack: bool = False) -> Any:
         model = cls(options=model_options(params))
     except pybamm.OptionError as exc:
         raise SimulationError(f"{params.source}: invalid model options: {exc}") from None
+    model = apply_extension_model(params, model)
     if for_liionpack:
         import liionpack as lp
 

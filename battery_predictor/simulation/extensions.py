@@ -124,6 +124,13 @@ BRUGGEMAN = "Electrolyte Bruggeman coefficient [-]"
 HYS_HALF_WIDTH = "Positive electrode OCP hysteresis half-width [V]"
 HYS_DECAY = "Positive particle hysteresis decay rate [-]"
 HYS_INITIAL = "Initial hysteresis state in positive electrode [-]"
+#: Rate (1/s) at which the hysteresis state relaxes towards 0 (the mean of the two branches) on its own,
+#: at rest as under load: ``dh/dt = K |I| / Q_p (s - h) - r h``. 0 (the default): no relaxation, PyBaMM's Axen model.
+HYS_RELAX = "Positive electrode hysteresis relaxation rate [s-1]"
+#: Activation energy (J/mol) of the hysteresis half-width: ``M(T) = M exp(E/R (1/T - 1/T_anchor))`` (``T_anchor``:
+#: :data:`ANCHOR_TEMPERATURE`, 298.15 K when absent): positive = the hysteresis shrinks as the cell warms. 0 (the
+#: default): the half-width does not depend on the temperature.
+HYS_ACTIVATION = "Positive electrode OCP hysteresis half-width activation energy [J.mol-1]"
 
 #: PyBaMM keys the Bruggeman exponent of :data:`BRUGGEMAN` is copied to.
 BRUGGEMAN_KEYS = (
@@ -150,7 +157,8 @@ EXTENSION_DEFAULTS: dict[str, dict[str, float]] = {
     "current_offset": {CURRENT_OFFSET: 0.0},
     "cell_imbalance": {WEAK_FRACTION: 1.0},
     "electrolyte_transport": {BRUGGEMAN: 1.5},
-    "hysteresis": {HYS_HALF_WIDTH: 0.0, HYS_DECAY: 50.0, HYS_INITIAL: -1.0},
+    "hysteresis": {HYS_HALF_WIDTH: 0.0, HYS_DECAY: 50.0, HYS_INITIAL: -1.0, HYS_RELAX: 0.0, HYS_ACTIVATION: 0.0,
+                   ANCHOR_TEMPERATURE: COLD_REFERENCE_K},
 }
 
 #: Thermal values a lumped model needs, taken from Chen2020 (LG M50) where the base set lacks them.
@@ -286,7 +294,8 @@ def with_cold_window_anchors(params: PackParams) -> PackParams:
 
 
 #: Extension keys a fit may search (``fitting.identifiable``), by extension.
-FITTED_EXTENSION_KEYS: dict[str, tuple[str, ...]] = {"hysteresis": (HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL)}
+FITTED_EXTENSION_KEYS: dict[str, tuple[str, ...]] = {"hysteresis": (HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL, HYS_RELAX,
+                                                                    HYS_ACTIVATION)}
 
 
 def with_fitted_extension_keys(params: PackParams) -> PackParams:
@@ -461,14 +470,63 @@ def _charged_stoichiometries(params: PackParams, pv: pybamm.ParameterValues) -> 
         return None
 
 
-def _shifted_ocp(ocp: Callable[[pybamm.Symbol], pybamm.Symbol],
-                 sign: float) -> Callable[[pybamm.Symbol], pybamm.Symbol]:
+def _shifted_ocp(ocp: Callable[[pybamm.Symbol], pybamm.Symbol], sign: float,
+                 temperature_dependent: bool = False) -> Callable[[pybamm.Symbol], pybamm.Symbol]:
+    """``ocp + sign M``, with ``M`` the half-width (at the ambient temperature when ``temperature_dependent``).
+
+    As :func:`_cold_window_ocp`, the temperature is PyBaMM's ``Ambient temperature [K]``: the isothermal cell's,
+    as the engine takes it (:func:`hysteresis_half_width_v`).
+    """
     import pybamm
 
     def shifted(sto: pybamm.Symbol) -> pybamm.Symbol:
-        return ocp(sto) + sign * pybamm.Parameter(HYS_HALF_WIDTH)
+        m = pybamm.Parameter(HYS_HALF_WIDTH)
+        if temperature_dependent:
+            t_amb = pybamm.FunctionParameter("Ambient temperature [K]", {
+                "Distance across electrode width [m]": pybamm.Scalar(0.0),
+                "Distance across electrode height [m]": pybamm.Scalar(0.0),
+                "Time [s]": pybamm.t})
+            m = m * half_width_factor(pybamm.Parameter(HYS_ACTIVATION), t_amb, pybamm.Parameter(ANCHOR_TEMPERATURE))
+        return ocp(sto) + sign * m
 
     return shifted
+
+
+def half_width_factor(activation_j_mol: Any, temperature_k: Any, anchor_k: Any = COLD_REFERENCE_K) -> Any:
+    """``exp(E/R (1/T - 1/T_anchor))``: the hysteresis half-width at ``temperature_k`` over its value at ``anchor_k``.
+
+    Numbers (returns a numpy array) or PyBaMM symbols (:data:`HYS_ACTIVATION`).
+    """
+    import pybamm
+
+    if any(isinstance(x, pybamm.Symbol) for x in (activation_j_mol, temperature_k, anchor_k)):
+        return pybamm.exp(activation_j_mol / R_GAS * (1.0 / temperature_k - 1.0 / anchor_k))
+    t = np.asarray(temperature_k, dtype=float)
+    return np.exp(float(activation_j_mol) / R_GAS * (1.0 / t - 1.0 / float(anchor_k)))
+
+
+def hysteresis_half_width_v(params: PackParams, temperature_k: float) -> float:
+    """The hysteresis half-width ``M`` (V) of ``params`` at ``temperature_k`` (:data:`HYS_ACTIVATION`)."""
+    m = extension_value(params, HYS_HALF_WIDTH)
+    e = extension_value(params, HYS_ACTIVATION)
+    if not e:
+        return m
+    return m * float(half_width_factor(e, temperature_k, extension_value(params, ANCHOR_TEMPERATURE)))
+
+
+def apply_extension_model(params: PackParams, model: Any) -> Any:
+    """Add what the active extensions change in the equations of PyBaMM ``model`` (modified and returned).
+
+    Called by :func:`~battery_predictor.simulation.cell_setup.build_model`. ``hysteresis`` with a relaxation rate
+    (:data:`HYS_RELAX`, not 0) adds ``- r h`` to the Axen model's hysteresis ODE of the positive electrode.
+    """
+    if "hysteresis" not in params.extensions or not extension_value(params, HYS_RELAX):
+        return model
+    import pybamm
+
+    h = model.variables["Positive electrode hysteresis state"]
+    model.rhs[h] = model.rhs[h] - pybamm.Parameter(HYS_RELAX) * h
+    return model
 
 
 def apply_extension_parameter_values(params: PackParams, pv: Any) -> Any:
@@ -513,8 +571,9 @@ def apply_extension_parameter_values(params: PackParams, pv: Any) -> Any:
         ocp = pv["Positive electrode OCP [V]"]
         if not callable(ocp):
             raise ValueError("the hysteresis extension needs a positive electrode OCP function")
-        pv.update({"Positive electrode lithiation OCP [V]": _shifted_ocp(ocp, -1.0),
-                   "Positive electrode delithiation OCP [V]": _shifted_ocp(ocp, +1.0)},
+        warm = bool(extension_value(params, HYS_ACTIVATION))
+        pv.update({"Positive electrode lithiation OCP [V]": _shifted_ocp(ocp, -1.0, warm),
+                   "Positive electrode delithiation OCP [V]": _shifted_ocp(ocp, +1.0, warm)},
                   check_already_exists=False)
         pv.update({k: pv[HYS_DECAY] for k in PYBAMM_HYS_DECAY_KEYS}, check_already_exists=False)
         pv.update({PYBAMM_HYS_INITIAL_KEY: pv[HYS_INITIAL]}, check_already_exists=False)
@@ -544,11 +603,14 @@ def hysteresis_rate_per_c(params: PackParams, pv: Any) -> float:
     return extension_value(params, HYS_DECAY) / hysteresis_positive_charge_c(pv)
 
 
-def hysteresis_step(h: ArrayLike, current_a: ArrayLike, duration_s: ArrayLike, rate_per_c: ArrayLike) -> np.ndarray:
-    """The hysteresis state after a constant current, exactly: ``s + (h - s) exp(-rate |I| dt)``.
+def hysteresis_step(h: ArrayLike, current_a: ArrayLike, duration_s: ArrayLike, rate_per_c: ArrayLike,
+                    relax_per_s: ArrayLike = 0.0) -> np.ndarray:
+    """The hysteresis state after a constant current, exactly.
 
-    This is the solution of ``dh/dt = rate |I| (s - h)``, ``s = -sign(I)`` (a discharge, ``I > 0``, moves
-    ``h`` to -1, the lithiation branch of the positive electrode; a charge to +1; at rest ``h`` stays).
+    This is the solution of ``dh/dt = a (s - h) - b h``, ``a = rate |I|``, ``s = -sign(I)``, ``b`` the relaxation
+    rate (a discharge, ``I > 0``, moves ``h`` towards -1, the lithiation branch of the positive electrode; a
+    charge towards +1; ``b`` towards 0): ``h_inf + (h - h_inf) exp(-(a + b) dt)``, ``h_inf = a s / (a + b)``.
+    Without relaxation (``b = 0``, PyBaMM's Axen model) that is ``s + (h - s) exp(-a dt)``, and at rest ``h`` stays.
 
     Parameters
     ----------
@@ -560,6 +622,8 @@ def hysteresis_step(h: ArrayLike, current_a: ArrayLike, duration_s: ArrayLike, r
         Time at that current in s (>= 0).
     rate_per_c : float or numpy.ndarray
         ``K / Q_p`` in 1/C (:func:`hysteresis_rate_per_c`).
+    relax_per_s : float or numpy.ndarray
+        ``b`` in 1/s (:data:`HYS_RELAX`, >= 0).
 
     Returns
     -------
@@ -567,14 +631,18 @@ def hysteresis_step(h: ArrayLike, current_a: ArrayLike, duration_s: ArrayLike, r
         The state at the end (stays within [-1, 1] when it starts there).
     """
     current = np.asarray(current_a, dtype=float)
-    target = -np.sign(current)
-    decay = np.exp(-np.asarray(rate_per_c, dtype=float) * np.abs(current) * np.asarray(duration_s, dtype=float))
+    a = np.asarray(rate_per_c, dtype=float) * np.abs(current)
+    total = a + np.asarray(relax_per_s, dtype=float)
     h = np.asarray(h, dtype=float)
-    return np.where(current == 0.0, h, target + (h - target) * decay)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        h_inf = np.where(total > 0.0, a * -np.sign(current) / np.where(total > 0.0, total, 1.0), 0.0)
+    decay = np.exp(-total * np.asarray(duration_s, dtype=float))
+    return np.where(total == 0.0, h, h_inf + (h - h_inf) * decay)
 
 
-def hysteresis_states(h0: float, duration_s: ArrayLike, current_a: ArrayLike, rate_per_c: float) -> np.ndarray:
-    """The hysteresis state at every boundary of piecewise-constant current steps (exact).
+def hysteresis_states(h0: float, duration_s: ArrayLike, current_a: ArrayLike, rate_per_c: float,
+                      relax_per_s: float = 0.0) -> np.ndarray:
+    """The hysteresis state at every boundary of piecewise-constant current steps (exact, :func:`hysteresis_step`).
 
     Parameters
     ----------
@@ -584,6 +652,8 @@ def hysteresis_states(h0: float, duration_s: ArrayLike, current_a: ArrayLike, ra
         Step lengths (s) and cell currents (A, positive = discharge), shape (n_steps,).
     rate_per_c : float
         ``K / Q_p`` in 1/C.
+    relax_per_s : float
+        Relaxation rate ``b`` (1/s; 0: none).
 
     Returns
     -------
@@ -591,12 +661,15 @@ def hysteresis_states(h0: float, duration_s: ArrayLike, current_a: ArrayLike, ra
         Shape (n_steps + 1,): the state at the start of each step and at the end of the last.
     """
     current = np.asarray(current_a, dtype=float)
-    target = (-np.sign(current)).tolist()
-    decay = np.exp(-float(rate_per_c) * np.abs(current) * np.asarray(duration_s, dtype=float)).tolist()
+    duration = np.asarray(duration_s, dtype=float)
+    a = float(rate_per_c) * np.abs(current)
+    total = a + float(relax_per_s)
+    safe = np.where(total > 0.0, total, 1.0)
+    h_inf = np.where(total > 0.0, a * -np.sign(current) / safe, 0.0).tolist()
+    decay = np.exp(-total * duration).tolist()
     out = [float(h0)]
     h = float(h0)
-    for s, a in zip(target, decay):  # h_{k+1} = s_k + (h_k - s_k) a_k (a_k = 1 at rest)
-        h = s + (h - s) * a
+    for target, d in zip(h_inf, decay):  # h_{k+1} = h_inf,k + (h_k - h_inf,k) d_k (d_k = 1 at rest without relaxation)
+        h = target + (h - target) * d
         out.append(h)
     return np.asarray(out)
-

@@ -35,6 +35,7 @@ from battery_predictor.simulation.cell_setup import (
 )
 from battery_predictor.simulation.engine.pack import pack_voltage_v
 from battery_predictor.simulation.extensions import series_resistance_factor, weak_group_fraction, weak_group_params
+from battery_predictor.simulation.load import StepLoad
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 if TYPE_CHECKING:
@@ -51,6 +52,22 @@ THICKNESS_TO_FRACTION = {
     "Negative electrode thickness [m]": "Negative electrode active material volume fraction",
     "Positive electrode thickness [m]": "Positive electrode active material volume fraction",
 }
+
+
+def solver_stops_s(params: PackParams, load: StepLoad, t_end: float) -> list[float]:
+    """The times IDAKLU must stop at: ``[0, t_end]``, and with the ``hysteresis`` extension every change of the current.
+
+    PyBaMM's Axen hysteresis state moves only while current flows; at rest the solver's steps grow to tens of
+    seconds and, told only ``[0, t_end]``, it steps over 10 s pulses (the state never moves). Each change of the
+    current is stopped at on both sides of its ramp (``edge - _EDGE_S`` and ``edge``).
+    """
+    if "hysteresis" not in params.extensions:
+        return [0.0, t_end]
+    changed = np.nonzero(np.diff(load.current_a) != 0.0)[0] + 1
+    edges = load.start_s[changed]
+    stops = np.concatenate([[0.0], np.column_stack([edges - _EDGE_S, edges]).ravel(), [t_end]])
+    stops = np.unique(stops[(stops >= 0.0) & (stops <= t_end)])
+    return [float(t) for t in stops]
 
 
 class FastPackSimulator:
@@ -116,7 +133,7 @@ class FastPackSimulator:
                 inputs[frac_key] *= float(pv[thick_key]) / built_thickness[thick_key]
         try:
             with quiet_pybamm():
-                sol = sim.solve(t_eval=[0.0, t_end], inputs=inputs)
+                sol = sim.solve(t_eval=np.asarray(solver_stops_s(params, request.load, t_end)), inputs=inputs)
         except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError) as exc:
             raise SimulationError(f"fast simulation failed: {str(exc).splitlines()[0]}") from None
         result = self._result(params, request, sol, tic)

@@ -148,3 +148,98 @@ def test_rate_is_pybamms_axen_rate_per_unit_charge(k2_hysteresis):
     # Prada2013 scaled: the positive electrode holds about 2.3 Ah
     assert 2.0 * 3600 < q_p < 2.6 * 3600
     assert ext.hysteresis_rate_per_c(k2_hysteresis, pv) == pytest.approx(300.0 / q_p)
+
+
+@pytest.mark.parametrize("h0, current_a, duration_s, relax", [(1.0, 0.0, 600.0, 1e-3), (-1.0, -6.0, 10.0, 5e-3),
+                                                              (0.7, 3.0, 100.0, 2e-2), (0.2, -0.5, 400.0, 1e-3)])
+def test_relaxing_step_is_the_exact_solution(h0, current_a, duration_s, relax):
+    rate = 300.0 / 8280.0
+
+    def f(h):
+        return rate * abs(current_a) * (-np.sign(current_a) - h) - relax * h
+
+    h, n = h0, 20000
+    dt = duration_s / n
+    for _ in range(n):  # classical Runge-Kutta
+        k1 = f(h)
+        k2 = f(h + 0.5 * dt * k1)
+        k3 = f(h + 0.5 * dt * k2)
+        k4 = f(h + dt * k3)
+        h += dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    got = float(ext.hysteresis_step(h0, current_a, duration_s, rate, relax))
+    assert got == pytest.approx(h, abs=1e-12)
+    states = ext.hysteresis_states(h0, [duration_s / 2, duration_s / 2], [current_a, current_a], rate, relax)
+    assert states[-1] == pytest.approx(got, abs=1e-14)
+
+
+def test_new_terms_default_to_the_axen_model(k2_hysteresis):
+    # defaults: no relaxation, a half-width that does not depend on the temperature; the step is the old one
+    assert ext.extension_value(k2_hysteresis, ext.HYS_RELAX) == 0.0
+    assert ext.extension_value(k2_hysteresis, ext.HYS_ACTIVATION) == 0.0
+    assert ext.hysteresis_half_width_v(k2_hysteresis, 323.15) == 0.02
+    h, i, d = np.array([-1.0, 0.3, 0.5]), np.array([-6.0, 0.0, 2.0]), np.array([10.0, 50.0, 7.0])
+    s = -np.sign(i)
+    old = np.where(i == 0.0, h, s + (h - s) * np.exp(-0.05 * np.abs(i) * d))
+    np.testing.assert_array_equal(ext.hysteresis_step(h, i, d, 0.05), old)
+    # the PyBaMM model is PyBaMM's own Axen model (no term added)
+    from battery_predictor.simulation.cell_setup import build_model
+
+    model = build_model(k2_hysteresis)
+    h_var = model.variables["Positive electrode hysteresis state"]
+    assert ext.HYS_RELAX not in str(model.rhs[h_var])
+
+
+def test_half_width_follows_arrhenius_from_the_anchor(k2_hysteresis):
+    warm = replace(k2_hysteresis, extra={**k2_hysteresis.extra, ext.HYS_ACTIVATION: 30000.0,
+                                         ext.ANCHOR_TEMPERATURE: 293.15})
+    assert ext.hysteresis_half_width_v(warm, 293.15) == pytest.approx(0.02)
+    at_50 = ext.hysteresis_half_width_v(warm, 323.15)
+    assert at_50 == pytest.approx(0.02 * np.exp(30000.0 / ext.R_GAS * (1 / 323.15 - 1 / 293.15)))
+    assert at_50 < 0.02 * 0.35
+
+
+@pytest.mark.parametrize("temperature_k", [293.15, 318.15])
+def test_engine_runs_the_relaxing_temperature_dependent_hysteresis_as_pybamm(k2_hysteresis, temperature_k):
+    """The relaxation (``- r h`` added to PyBaMM's Axen ODE) and the Arrhenius half-width: engine = PyBaMM."""
+    from battery_predictor.simulation.engine import EngineSimulator
+    from battery_predictor.simulation.fast import FastPackSimulator
+
+    params = replace(k2_hysteresis, extra={**k2_hysteresis.extra, ext.HYS_RELAX: 1.0 / 120.0,
+                                           ext.HYS_ACTIVATION: 30000.0, ext.ANCHOR_TEMPERATURE: 298.15})
+    req = replace(_pulses(), ambient_temperature_k=temperature_k)
+    engine = EngineSimulator(fallback=None).simulate(params, req)
+    pybamm = FastPackSimulator().simulate(params, req)  # PyBaMM's Axen model with the term added, IDAKLU
+    assert "engine_fallback" not in engine.extra and engine.extra["engine_backend"].endswith("+hysteresis")
+    assert engine.termination == pybamm.termination == "cell_cutoff"
+    assert engine.end_time_s == pytest.approx(pybamm.end_time_s, abs=0.05)
+    n = min(engine.time_s.size, pybamm.time_s.size)
+    assert np.max(np.abs(engine.pack_voltage_v[:n] - pybamm.pack_voltage_v[:n])) < 2e-4  # V
+    # the state relaxes towards 0 in the rests (it stays put without the relaxation)
+    h = engine.extra["hysteresis_state"]
+    t = engine.time_s
+    rest = (t > 935.0) & (t < 1025.0)  # the rest after the 6 A discharge pulse (900-930 s)
+    assert np.all(np.diff(h[rest]) > 0.0) and np.all(h[rest] < 0.0)
+    # the voltage moves by M(T) h
+    plain = EngineSimulator(fallback=None).simulate(replace(params, extensions=()), req)
+    m = min(n, plain.time_s.size)
+    np.testing.assert_allclose(engine.pack_voltage_v[:m] - plain.pack_voltage_v[:m],
+                               ext.hysteresis_half_width_v(params, temperature_k) * h[:m], atol=1e-9)
+
+
+def test_optional_coordinates_of_the_new_terms(k2_hysteresis):
+    from battery_predictor.errors import ParamsError
+    from battery_predictor.fitting.identifiable import default_space, pybamm_values
+
+    extra = ("hysteresis_relaxation_rate_s", "hysteresis_activation_energy_j_mol")
+    default = [c.name for c in default_space(k2_hysteresis)]
+    assert not set(extra) & set(default)  # searched only when asked: existing fits do not move
+    space = {c.name: c for c in default_space(k2_hysteresis, extra=extra)}
+    relax, energy = space["hysteresis_relaxation_rate_s"], space["hysteresis_activation_energy_j_mol"]
+    assert relax.log and relax.initial == relax.low  # the params' 0 (no relaxation) starts at the low end
+    assert not energy.log and energy.initial == 0.0
+    values = pybamm_values(k2_hysteresis, {"hysteresis_relaxation_rate_s": 2e-3,
+                                           "hysteresis_activation_energy_j_mol": 25000.0})[0]
+    fitted = ext.with_fitted_extension_keys(k2_hysteresis).with_values(values)
+    assert fitted.extra[ext.HYS_RELAX] == 2e-3 and fitted.extra[ext.HYS_ACTIVATION] == 25000.0
+    with pytest.raises(ParamsError, match="hysteresis"):
+        default_space(replace(k2_hysteresis, extensions=()), extra=extra[:1])

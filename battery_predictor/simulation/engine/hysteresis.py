@@ -3,7 +3,8 @@
 In the SPM the positive particles' interfacial current is uniform, so PyBaMM's hysteresis ODE of the
 positive electrode (option ``{"open-circuit potential": ("single", "Axen")}`` with the lithiation /
 delithiation OCPs the extension makes, OCP -/+ the half-width ``M``) is
-``dh/dt = K |I| / Q_p (s - h)``, ``s = -sign(I)``, and the cell voltage is the hysteresis-free SPM's plus
+``dh/dt = K |I| / Q_p (s - h)``, ``s = -sign(I)`` (with the extension's relaxation rate ``r`` not 0,
+``- r h`` is added: the state relaxes towards 0 at rest), and the cell voltage is the hysteresis-free SPM's plus
 ``M h``. Neither depends on the particles, so the engine runs the cell without the option (its
 extraction stays linear) and adds ``M h`` with ``h`` stepped exactly on the piecewise-constant current
 (:func:`~battery_predictor.simulation.extensions.hysteresis_states`, the equations' one source).
@@ -52,11 +53,14 @@ class Hysteresis:
         ``K / Q_p`` (1/C).
     initial_state : float
         ``h`` at the start (-1 discharge branch .. +1 charge branch).
+    relax_per_s : float
+        Relaxation rate of ``h`` towards 0 (1/s; 0: PyBaMM's Axen model).
     """
 
     half_width_v: float
     rate_per_c: float
     initial_state: float
+    relax_per_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -100,11 +104,11 @@ def _shifted(model: LinearSpm, half_width_v: float) -> LinearSpm:
 
 
 def states_at_times(start_s: np.ndarray, boundary_states: np.ndarray, duration_s: np.ndarray,
-                    current_a: np.ndarray, rate_per_c: float, time_s: np.ndarray) -> np.ndarray:
+                    current_a: np.ndarray, rate_per_c: float, time_s: np.ndarray, relax_per_s: float = 0.0) -> np.ndarray:
     """``h`` at ``time_s`` from its values at the step boundaries (exact inside each step)."""
     step = np.clip(np.searchsorted(start_s, time_s, side="right") - 1, 0, duration_s.size - 1)
     tau = np.minimum(time_s - start_s[step], duration_s[step])
-    return hysteresis_step(boundary_states[step], current_a[step], tau, rate_per_c)
+    return hysteresis_step(boundary_states[step], current_a[step], tau, rate_per_c, relax_per_s)
 
 
 def run_cell(model: LinearSpm, modal: ModalSystem, duration_s: np.ndarray, current_a: np.ndarray, *,
@@ -142,7 +146,10 @@ def run_cell(model: LinearSpm, modal: ModalSystem, duration_s: np.ndarray, curre
         raise SimulationError(f"hysteresis half-width must be >= 0 V, got {m}")
     duration_s = np.asarray(duration_s, dtype=float)
     current = np.asarray(current_a, dtype=float)
-    h = hysteresis_states(hysteresis.initial_state, duration_s, current, hysteresis.rate_per_c)
+    relax = float(hysteresis.relax_per_s)
+    if not relax >= 0.0:
+        raise SimulationError(f"hysteresis relaxation rate must be >= 0 1/s, got {relax}")
+    h = hysteresis_states(hysteresis.initial_state, duration_s, current, hysteresis.rate_per_c, relax)
     shifted = _shifted(model, m)
     runs = run_cells(shifted, modal, duration_s, current, c_n0_mol_m3=c_n0_mol_m3, c_p0_mol_m3=c_p0_mol_m3,
                      temperature_k=temperature_k, sets=sets, backend=backend, keep_states=True)
@@ -165,21 +172,21 @@ def run_cell(model: LinearSpm, modal: ModalSystem, duration_s: np.ndarray, curre
         else:
             upper = duration_s[k] if k < kernel_step else float(runs.end_time_s[0]) - edges[k]
             end_time = float(edges[k]) + _root_in_step(model, modal, runs, duration_s, current, k, upper,
-                                                        m, float(h[k]), hysteresis.rate_per_c)
+                                                        m, float(h[k]), hysteresis.rate_per_c, relax)
     time_s = np.asarray(time_s, dtype=float)
     keep = time_s < end_time if reached else time_s <= end_time
     t_out = time_s[keep]
-    h_out = states_at_times(edges[:-1], h, duration_s, current, hysteresis.rate_per_c, t_out)
+    h_out = states_at_times(edges[:-1], h, duration_s, current, hysteresis.rate_per_c, t_out, relax)
     v_cell = voltages_at_times(shifted, runs, modal, duration_s, current, t_out)[0] + m * h_out
     h_end = float(states_at_times(edges[:-1], h, duration_s, current, hysteresis.rate_per_c,
-                                  np.array([end_time]))[0]) if n_steps else float(hysteresis.initial_state)
+                                  np.array([end_time]), relax)[0]) if n_steps else float(hysteresis.initial_state)
     return HysteresisRun(time_s=t_out, cell_voltage_v=v_cell, hysteresis_state=h_out, end_time_s=end_time,
                          reached_cutoff=reached, final_state=h_end, backend=f"{runs.extra['backend']}+hysteresis")
 
 
 def _root_in_step(model: LinearSpm, modal: ModalSystem, runs: CellRuns, duration_s: np.ndarray, current: np.ndarray,
                   k: int,
-                  upper_s: float, m: float, h_k: float, rate_per_c: float) -> float:
+                  upper_s: float, m: float, h_k: float, rate_per_c: float, relax_per_s: float = 0.0) -> float:
     """Time into step ``k`` (s) at which the total voltage meets the cut-off (Illinois regula falsi on ``[0, upper_s]``)."""
     batch = runs.extra["batch"]
     z_k = states_at(batch.lam, batch.drive, runs.extra["checkpoints"], duration_s, current, np.array([k]),
@@ -192,7 +199,7 @@ def _root_in_step(model: LinearSpm, modal: ModalSystem, runs: CellRuns, duration
         s = (decay * z_k + phi * batch.drive * i_k) @ modal.surface_weights.T
         v = model.cell_voltage_v(s[:, 0], s[:, 1], i_k, batch.temperature_k, batch.eps_n, batch.eps_p,
                                  batch.height_m)
-        return float(v[0]) + m * float(hysteresis_step(h_k, i_k, tau, rate_per_c)) - cut
+        return float(v[0]) + m * float(hysteresis_step(h_k, i_k, tau, rate_per_c, relax_per_s)) - cut
 
     lo, hi = 0.0, float(upper_s)
     f_lo, f_hi = f(lo), f(hi)

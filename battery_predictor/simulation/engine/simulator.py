@@ -72,12 +72,15 @@ from battery_predictor.simulation.engine.thermal import (
 )
 from battery_predictor.simulation.extensions import (
     COLD_ANCHOR_KEYS,
+    HYS_ACTIVATION,
     HYS_DECAY,
     HYS_HALF_WIDTH,
     HYS_INITIAL,
+    HYS_RELAX,
     cold_window_active,
     cold_window_anchors,
     extension_value,
+    hysteresis_half_width_v,
     hysteresis_rate_per_c,
     series_resistance_factor,
 )
@@ -143,7 +146,7 @@ _SIGNATURE_K = (233.15, 263.15, 298.15, 333.15, 373.15)
 C_MAX_KEYS = {C_MAX_N: "c_max_n", C_MAX_P: "c_max_p"}
 _STATE_KEYS = frozenset({C_N0, C_P0})
 #: Values of the extensions run beside the cell (the extraction does not depend on them).
-_BESIDE_KEYS = frozenset({HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL})
+_BESIDE_KEYS = frozenset({HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL, HYS_RELAX, HYS_ACTIVATION})
 #: Extensions whose whole effect is inside PyBaMM's cell model (model options, parameter values) or
 #: outside the simulator (the current offset is applied where a recording becomes a load); the
 #: extraction checks that the model still splits into linear particles and a voltage function.
@@ -509,9 +512,10 @@ class EngineSimulator:
         duration_s = np.diff(load.edges_s())
         cell_current_a = load.current_a / params.parallel
         pv = self._parameter_values(params)
-        term = Hysteresis(half_width_v=extension_value(params, HYS_HALF_WIDTH),
+        term = Hysteresis(half_width_v=hysteresis_half_width_v(params, temperature_k),
                           rate_per_c=hysteresis_rate_per_c(params, pv),
-                          initial_state=extension_value(params, HYS_INITIAL))
+                          initial_state=extension_value(params, HYS_INITIAL),
+                          relax_per_s=extension_value(params, HYS_RELAX))
         t_engine = time.perf_counter()
         run = run_cell(model, modal, duration_s, cell_current_a, c_n0_mol_m3=c0[0], c_p0_mol_m3=c0[1],
                        temperature_k=temperature_k, sets=sets, backend=self.backend, hysteresis=term,
