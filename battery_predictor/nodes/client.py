@@ -8,8 +8,8 @@ messages (the rule that only :mod:`battery_predictor.nodes` imports ROS, checked
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
-import random
 import time
 from collections.abc import Iterator, Sequence
 from typing import Any
@@ -20,6 +20,7 @@ from battery_predictor_msgs.srv import CanAcceptRoute, FeasibleTasks, PlanRoute
 from rclpy.context import Context
 
 from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.nodes.domains import DomainClaim, claim_private_domain
 from battery_predictor.nodes.messages import route_section_msgs
 from battery_predictor.profiles.ranger import RouteSection
 
@@ -44,11 +45,21 @@ def ros_context(context: Context | None = None) -> Iterator[Context | None]:
 
 
 def isolated_context() -> Context:
-    """An rclpy context on a random ROS domain (150-229), discovery on this machine only."""
+    """An rclpy context on a ROS domain of its own on this machine, discovery on this machine only.
+
+    The domain is claimed with :func:`~battery_predictor.nodes.domains.claim_private_domain` and
+    given back when the context shuts down.
+    """
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.pop("ROS_STATIC_PEERS", None)
+    claim = claim_private_domain()
     context = Context()
-    rclpy.init(args=["battery-predictor"], context=context, domain_id=random.randrange(150, 230))
+    try:
+        rclpy.init(args=["battery-predictor"], context=context, domain_id=claim.domain_id)
+    except Exception:
+        claim.release()
+        raise
+    context.on_shutdown(functools.partial(DomainClaim.release, claim))
     return context
 
 

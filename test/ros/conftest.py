@@ -1,15 +1,14 @@
 """Fixtures for tests that talk over ROS 2 (rclpy with the pip wheels).
 
-Every test gets its own ``rclpy.Context`` initialised with its own ROS domain
-id, so tests never share DDS traffic with each other, with tests running in
-parallel in other processes, or with anything else on domain 0. Discovery is
-kept on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``).
+Every test gets its own ``rclpy.Context`` initialised with a ROS domain id it
+claims for its duration (:func:`battery_predictor.nodes.domains.claim_private_domain`,
+a lock per id on this machine), so tests never share DDS traffic with each other,
+with tests, replays or demos running in other processes, or with anything on
+domain 0. Discovery is kept on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``).
 """
 
 from __future__ import annotations
 
-import itertools
-import os
 import uuid
 from collections.abc import Iterator
 
@@ -17,21 +16,17 @@ import pytest
 import rclpy
 from rclpy.context import Context
 
-# Fast DDS maps domain ids 0..232 to UDP ports; stay clear of 0 (the default).
-_DOMAIN_MIN = 100
-_DOMAIN_COUNT = 130
-_counter = itertools.count()
-
-
-def _next_domain_id() -> int:
-    """A domain id distinct for each test of this process, spread over processes by pid."""
-    return _DOMAIN_MIN + (os.getpid() * 31 + next(_counter)) % _DOMAIN_COUNT
+from battery_predictor.nodes.domains import claim_private_domain
 
 
 @pytest.fixture
-def ros_domain_id() -> int:
-    """The ROS domain id of this test's context."""
-    return _next_domain_id()
+def ros_domain_id() -> Iterator[int]:
+    """The ROS domain id of this test's context, held by no other process while the test runs."""
+    claim = claim_private_domain()
+    try:
+        yield claim.domain_id
+    finally:
+        claim.release()
 
 
 @pytest.fixture
