@@ -352,6 +352,15 @@ def _widened(name: str, initial: float, low: float, high: float, log: bool) -> C
     return Coordinate(name, initial, min(low, initial), max(high, initial), log)
 
 
+def highest_start_ocv_v(upper_cutoff_v: float, first_voltage_v: float) -> float:
+    """Highest plausible open-circuit cell voltage (V) at the start of a recording.
+
+    :data:`FULL_OCV_MARGIN_V` above the upper cut-off ``upper_cutoff_v`` (V per cell), or above the
+    first measured cell voltage ``first_voltage_v`` where the data start higher.
+    """
+    return max(upper_cutoff_v, first_voltage_v) + FULL_OCV_MARGIN_V
+
+
 def initial_ocv_coordinates(params: PackParams, recordings: Sequence[Recording]) -> list[Coordinate]:
     """One initial-OCV coordinate per recording, around its first cell voltage.
 
@@ -370,7 +379,7 @@ def initial_ocv_coordinates(params: PackParams, recordings: Sequence[Recording])
                           f"{upper_v:.3f} V; its initial state is searched around the measured voltage",
                           UserWarning, stacklevel=2)
         lo = max(lower_v, v_first - INITIAL_OCV_MARGIN_V[0])
-        hi = min(v_first + INITIAL_OCV_MARGIN_V[1], max(upper_v, v_first) + FULL_OCV_MARGIN_V)
+        hi = min(v_first + INITIAL_OCV_MARGIN_V[1], highest_start_ocv_v(upper_v, v_first))
         start = v_first + 0.02 if float(rec.current_a[0]) > 0 else v_first
         out.append(Coordinate(f"initial_ocv_v:{k}", min(max(start, lo), hi), lo, hi, False, recording=k))
     return out

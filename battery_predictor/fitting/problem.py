@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -9,6 +10,7 @@ import numpy as np
 
 from battery_predictor.errors import InputDataError, SimulationError
 from battery_predictor.fitting.cost import r2_mod, rmse_v
+from battery_predictor.fitting.identifiable import FULL_OCV_MARGIN_V, highest_start_ocv_v
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording
 from battery_predictor.simulation.base import PackSimResult, PackSimulator, SimulationRequest
@@ -86,6 +88,11 @@ def loaded_start_ocv_v(params: PackParams, rec: Recording, simulator: PackSimula
     OCV at which the model's own first simulated voltage equals the measured one, found by fixed-point
     passes on a simulation of the first samples (the drop hardly depends on the state).
 
+    The OCV stays between the first voltage and :data:`~battery_predictor.fitting.identifiable.FULL_OCV_MARGIN_V`
+    per cell above the params' upper cut-off (the identification's bound): a model whose drop near
+    full charge is larger than the cell's would otherwise be pushed to an OCV no cell has. When the
+    bound is reached before the model's voltage matches, a warning says so and the bound is the answer.
+
     Parameters
     ----------
     params : PackParams
@@ -108,18 +115,28 @@ def loaded_start_ocv_v(params: PackParams, rec: Recording, simulator: PackSimula
     load = StepLoad.from_samples(rec.time_s[:n], rec.current_a[:n])
     base = SimulationRequest(load=load, ambient_temperature_k=recording_temperature_k(params, rec),
                              output_time_s=np.array([0.0]))
-    ocv = v_first
+    upper_v = float(params.parameter_values()["Upper voltage cut-off [V]"])
+    cap = highest_start_ocv_v(upper_v, v_first / params.series) * params.series
+    ocv, miss = v_first, 0.0
     for _ in range(_LOADED_START_PASSES):
         try:
             res = simulator.simulate(params, replace(base, initial_pack_ocv_v=ocv))
         except SimulationError:
             return v_first if ocv == v_first else ocv
         if res.pack_voltage_v.size == 0:
-            break
+            return ocv
         miss = v_first - float(res.pack_voltage_v[0])
-        ocv += miss
         if abs(miss) < _LOADED_START_TOLERANCE_V:
+            return ocv
+        step = min(max(ocv + miss, v_first), cap)
+        if step == ocv:
             break
+        ocv = step
+    if ocv >= cap and miss > _LOADED_START_TOLERANCE_V:
+        warnings.warn(f"{rec.source}: the model's first voltage under {float(rec.current_a[0]):.3g} A stays "
+                      f"{miss * 1000:.0f} mV below the measured {v_first:.3f} V even from an OCV of {cap:.3f} V "
+                      f"({FULL_OCV_MARGIN_V} V per cell above the upper cut-off); the model's drop near full "
+                      "charge is larger than the cell's; starting from that OCV", UserWarning, stacklevel=2)
     return ocv
 
 

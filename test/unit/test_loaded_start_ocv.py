@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+from battery_predictor.fitting.identifiable import FULL_OCV_MARGIN_V
 from battery_predictor.fitting.problem import loaded_start_ocv_v, request_for_recording, starts_at_rest
+from battery_predictor.params import load_params
 from battery_predictor.recording import Recording
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _recording(params, load: StepLoad, ocv_v: float) -> Recording:
@@ -34,3 +40,25 @@ def test_a_recording_at_rest_keeps_its_first_voltage(temi_params):
     assert starts_at_rest(temi_params, rec)
     assert loaded_start_ocv_v(temi_params, rec, get_simulator("engine")) == float(rec.voltage_v[0])
     assert request_for_recording(temi_params, rec, initial_state="voltage").initial_pack_ocv_v == rec.voltage_v[0]
+
+
+class _DropsMoreNearFull:
+    """A stand-in simulator whose first voltage falls as the OCV rises above 4.15 V (a model whose
+    drop under load explodes near full charge, as Chen2020's OCPs on the Panasonic fit)."""
+
+    def simulate(self, params, request):
+        from battery_predictor.simulation.base import PackSimResult
+
+        ocv = float(request.initial_pack_ocv_v)
+        v = ocv - 0.05 if ocv < 4.15 else 4.10 - 2.0 * (ocv - 4.15)
+        return PackSimResult(time_s=np.array([0.0]), pack_voltage_v=np.array([v]), pack_current_a=np.array([1.9]),
+                             min_cell_voltage_v=np.array([v]), termination="end_of_load", end_time_s=2.0)
+
+
+def test_a_model_that_cannot_reach_the_first_voltage_stops_at_the_highest_plausible_ocv():
+    panasonic_params = load_params(REPO / "params" / "panasonic_18650pf.yaml")
+    rec = Recording(np.array([0.0, 1.0, 2.0]), np.array([4.157, 4.05, 4.06]), np.array([1.87, 1.82, 1.39]),
+                    source="cycle1")
+    with pytest.warns(UserWarning, match="stays .* below the measured 4.157 V even from an OCV of 4.250 V"):
+        ocv = loaded_start_ocv_v(panasonic_params, rec, _DropsMoreNearFull())
+    assert ocv == pytest.approx(4.20 + FULL_OCV_MARGIN_V)
