@@ -24,6 +24,10 @@ hysteresis_relaxation_     log    optional, with the ``hysteresis`` extension: t
 rate_s                            state relaxes towards 0 (:data:`HYSTERESIS_RELAX_RANGE_S`)
 hysteresis_activation_     lin    optional, with the ``hysteresis`` extension: the activation energy of its
 energy_j_mol                      half-width (:data:`HYSTERESIS_ACTIVATION_RANGE_J_MOL`)
+weak_group_capacity_      lin    with the ``cell_imbalance`` extension: the capacity of the one weak series
+fraction                          group as a fraction of the others' (:data:`WEAK_GROUP_FRACTION_RANGE`); a
+                                  pack whose test or BMS stops on its weakest group ends where that group
+                                  reaches the cell cut-off, which the data's end determines
 initial_ocv_v:<k>          lin    open-circuit cell voltage at the start of recording ``k`` (state)
 ========================== ====== ===================================================================
 
@@ -114,6 +118,9 @@ HYSTERESIS_COORDINATES = tuple(_HYSTERESIS_KEYS)
 HYSTERESIS_RELAX_RANGE_S = (1.0e-5, 1.0e-1)
 #: Search range of the activation energy of the hysteresis half-width (J/mol, linear).
 HYSTERESIS_ACTIVATION_RANGE_J_MOL = (0.0, 80000.0)
+#: Search range of the weak series group's capacity fraction (extension ``cell_imbalance``; linear).
+WEAK_GROUP_FRACTION_RANGE = (0.5, 1.0)
+_IMBALANCE_KEYS = {"weak_group_capacity_fraction": "Weak series group capacity fraction"}
 #: Optional hysteresis coordinates -> (extension key, search range, log scale).
 _HYSTERESIS_OPTIONAL = {
     "hysteresis_relaxation_rate_s": ("Positive electrode hysteresis relaxation rate [s-1]", HYSTERESIS_RELAX_RANGE_S, True),
@@ -222,6 +229,10 @@ def shipped_coordinates(params: PackParams) -> dict[str, float]:
         from battery_predictor.simulation.extensions import extension_value
 
         out.update({name: extension_value(params, key) for name, key in _HYSTERESIS_KEYS.items()})
+    if "cell_imbalance" in params.extensions:
+        from battery_predictor.simulation.extensions import extension_value
+
+        out.update({name: extension_value(params, key) for name, key in _IMBALANCE_KEYS.items()})
     return out
 
 
@@ -303,6 +314,9 @@ def default_space(params: PackParams, recordings: Sequence[Recording] = (),
                               *HYSTERESIS_HALF_WIDTH_RANGE_V, log=False))
         space.append(_widened("hysteresis_decay_rate", shipped["hysteresis_decay_rate"], *HYSTERESIS_DECAY_RANGE,
                               log=True))
+    if "cell_imbalance" in params.extensions:
+        space.append(_widened("weak_group_capacity_fraction", shipped["weak_group_capacity_fraction"],
+                              *WEAK_GROUP_FRACTION_RANGE, log=False))
     space.extend(initial_ocv_coordinates(params, recordings))
     return space
 
@@ -448,6 +462,9 @@ def pybamm_values(params: PackParams, coordinates: Mapping[str, float], n_record
     for name, (key, _, _) in _HYSTERESIS_OPTIONAL.items():
         if name in coordinates:
             shared[key] = float(coordinates[name])
+    for name, key in _IMBALANCE_KEYS.items():
+        if name in coordinates:
+            shared[key] = c[name]
     x_0, y_0 = _first_state(params, basis, c, shipped, "initial_ocv_v:0" in c)
     q_li_ah = x_0 * c["negative_capacity_ah"] + y_0 * c["positive_capacity_ah"]
     out = []

@@ -41,8 +41,10 @@ extension                  what it changes
 ``cell_imbalance``         the cells of one series position hold ``Weak series group capacity
                            fraction`` of the others' capacity (their electrode area is scaled): per-cell
                            values for liionpack (:func:`imbalance_cell_inputs`); the fast simulator adds
-                           a second cell for the weak group (:func:`weak_group_params`), and so does
-                           the predictor's runner (``prediction.cell_runner.PackRunner``).
+                           a second cell for the weak group (:func:`weak_group_params`), the engine a
+                           second parameter set of the same extraction (electrode height scaled), and
+                           so does the predictor's runner (``prediction.cell_runner.PackRunner``). The
+                           fit searches the fraction (``weak_group_capacity_fraction``).
 ``electrolyte_transport``  the SPMe (electrolyte concentration and potential) instead of the SPM,
                            with the fitted Bruggeman exponent ``Electrolyte Bruggeman coefficient
                            [-]`` (tortuosity: effective transport = eps ** b) in every region.
@@ -295,7 +297,8 @@ def with_cold_window_anchors(params: PackParams) -> PackParams:
 
 #: Extension keys a fit may search (``fitting.identifiable``), by extension.
 FITTED_EXTENSION_KEYS: dict[str, tuple[str, ...]] = {"hysteresis": (HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL, HYS_RELAX,
-                                                                    HYS_ACTIVATION)}
+                                                                    HYS_ACTIVATION),
+                                                     "cell_imbalance": (WEAK_FRACTION,)}
 
 
 def with_fitted_extension_keys(params: PackParams) -> PackParams:

@@ -102,3 +102,30 @@ def test_engine_matches_pybamm_with_temperature_dependent_diffusivities_away_fro
     v_ref = pack_voltage_v(v_cell, load.current_at(engine.time_s), series=params.series,
                            r_eq_ohm=reference.extra["r_eq_ohm"])
     assert float(np.sqrt(np.mean((engine.pack_voltage_v - v_ref) ** 2))) <= RMS_LIMIT_V
+
+
+def test_engine_runs_a_weak_series_group_as_pybamm_does(temi_params):
+    """Extension ``cell_imbalance``: the weak group is a second set of the same extraction; the pack ends
+    when its cell reaches the cut-off, with the others' still above it."""
+    from dataclasses import replace
+
+    from battery_predictor.profiles.temi import generate_usage_profile
+    from battery_predictor.simulation.extensions import WEAK_FRACTION
+
+    params = replace(temi_params, extensions=("cell_imbalance",), extra={**temi_params.extra, WEAK_FRACTION: 0.8})
+    load = StepLoad.from_profile(generate_usage_profile(seed=4, max_duration_s=2400)).scale_current(4.0).resample(5.0)
+    request = SimulationRequest(load=load, initial_soc=0.2, output_time_s=_report_times(load))
+    engine = EngineSimulator(fallback=None).simulate(params, request)
+    reference = FastPackSimulator(rtol=1e-10, atol=1e-10).simulate(params, request)
+    assert "engine_fallback" not in engine.extra
+    assert engine.termination == reference.termination == "cell_cutoff"
+    n = min(engine.time_s.size, reference.time_s.size) - 1  # the last report time sits on the cut-off
+    np.testing.assert_allclose(engine.time_s[:n], reference.time_s[:n])
+    rms_v = float(np.sqrt(np.mean((engine.pack_voltage_v[:n] - reference.pack_voltage_v[:n]) ** 2)))
+    assert rms_v <= RMS_LIMIT_V
+    assert abs(engine.end_time_s - reference.end_time_s) / reference.end_time_s <= CUTOFF_LIMIT_FRACTION
+    # the weak cell ended the run: the other cells are still well above it
+    v_weak = engine.min_cell_voltage_v[-1]
+    v_others = (engine.pack_voltage_v[-1] + engine.pack_current_a[-1] * float(engine.extra["r_eq_ohm"]) - v_weak) \
+        / (params.series - 1)
+    assert v_others > v_weak + 0.05

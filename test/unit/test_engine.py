@@ -279,7 +279,7 @@ def test_simulator_falls_back_visibly_for_what_the_engine_does_not_cover(temi_pa
     from battery_predictor.simulation.engine.simulator import EngineSimulator
 
     request = SimulationRequest(load=StepLoad.constant(3.0, 60.0), initial_soc=0.5)
-    params = temi_params.with_values({}, extensions=("cell_imbalance",))
+    params = temi_params.with_values({}, extensions=("electrolyte_transport",))
     with caplog.at_level("WARNING"):
         result = EngineSimulator(fallback=_StubSimulator()).simulate(params, request)
     assert result.extra["engine_fallback"].startswith("stub: ")

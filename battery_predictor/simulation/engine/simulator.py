@@ -20,6 +20,11 @@ depends on beyond the particle surfaces, concentration-dependent diffusivities, 
 is simulated by the fallback simulator (the fast one by default); the result says so in
 ``extra["engine_fallback"]`` and a warning is logged, so a fallback is never silent.
 
+The extension ``cell_imbalance`` runs its weak series group as a second parameter set of the same
+extraction (electrode height x the weak fraction, the same initial concentrations): the pack voltage
+is ``(series - 1) V_normal + V_weak - I R_eq`` and the run ends with the group that reaches the
+cut-off first.
+
 The extension ``hysteresis`` (PyBaMM's one-state Axen OCP hysteresis) runs on isothermal cells: the cell
 is extracted without the option and the hysteresis voltage is stepped exactly beside it
 (:mod:`~battery_predictor.simulation.engine.hysteresis`); the result carries ``extra["hysteresis_state"]``
@@ -77,12 +82,14 @@ from battery_predictor.simulation.extensions import (
     HYS_HALF_WIDTH,
     HYS_INITIAL,
     HYS_RELAX,
+    WEAK_FRACTION,
     cold_window_active,
     cold_window_anchors,
     extension_value,
     hysteresis_half_width_v,
     hysteresis_rate_per_c,
     series_resistance_factor,
+    weak_group_fraction,
 )
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
@@ -146,17 +153,18 @@ _SIGNATURE_K = (233.15, 263.15, 298.15, 333.15, 373.15)
 C_MAX_KEYS = {C_MAX_N: "c_max_n", C_MAX_P: "c_max_p"}
 _STATE_KEYS = frozenset({C_N0, C_P0})
 #: Values of the extensions run beside the cell (the extraction does not depend on them).
-_BESIDE_KEYS = frozenset({HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL, HYS_RELAX, HYS_ACTIVATION})
+_BESIDE_KEYS = frozenset({HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL, HYS_RELAX, HYS_ACTIVATION, WEAK_FRACTION})
 #: Extensions whose whole effect is inside PyBaMM's cell model (model options, parameter values) or
 #: outside the simulator (the current offset is applied where a recording becomes a load); the
 #: extraction checks that the model still splits into linear particles and a voltage function.
 CELL_MODEL_EXTENSIONS = ("capacity_fade", "current_offset", "hysteresis", "resistance_growth")
-#: Extensions the simulator covers: the cell-model ones and ``temperature`` (its diffusivities and
+#: Extensions the simulator covers: the cell-model ones, ``temperature`` (its diffusivities and
 #: exchange currents are inside PyBaMM's model; its series-resistance factor is applied to ``R_eq``
-#: at the cell temperature, :func:`_series_resistance_ohm`).
-ENGINE_EXTENSIONS = CELL_MODEL_EXTENSIONS + ("temperature",)
+#: at the cell temperature, :func:`_series_resistance_ohm`) and ``cell_imbalance`` (the weak group is
+#: a second parameter set of the same extraction, its electrode height scaled).
+ENGINE_EXTENSIONS = CELL_MODEL_EXTENSIONS + ("temperature", "cell_imbalance")
 #: Extensions the simulator runs beside the extracted cell (the cell is extracted without them).
-VOLTAGE_TERM_EXTENSIONS = ("hysteresis",)
+VOLTAGE_TERM_EXTENSIONS = ("hysteresis", "cell_imbalance")
 
 
 def engine_cell_params(params: PackParams) -> PackParams:
@@ -272,6 +280,8 @@ class EngineSimulator:
         reason = self.unsupported_reason(params, request)
         if reason is None and "hysteresis" in params.extensions:
             reason = "the batch does not run the hysteresis extension (simulate each set)"
+        if reason is None and weak_group_fraction(params) != 1.0:
+            reason = "the batch does not run a weak series group (simulate each set)"
         if reason is not None:
             raise SimulationError(f"engine: {reason}")
         model, modal, base = self._model(params, self._temperature_k(params, request))
@@ -327,6 +337,8 @@ class EngineSimulator:
             return f"the engine does not cover the extensions {outside}"
         if "hysteresis" in params.extensions and is_lumped_thermal(params):
             return "the engine's hysteresis extension runs on isothermal cells, not a lumped thermal one"
+        if "hysteresis" in params.extensions and weak_group_fraction(params) != 1.0:
+            return "the engine runs the hysteresis extension without a weak series group"
         return _diffusivity_reason(params, EngineSimulator._temperature_k(params, request))
 
     # ---------------------------------------------------------------- helpers
@@ -467,33 +479,39 @@ class EngineSimulator:
             return self._simulate_hysteresis(params, request, model, modal, sets, (c_n0, c_p0), tic)
         step = np.clip(np.searchsorted(load.start_s, t_out, side="right") - 1, 0, load.start_s.size - 1)
         on_starts = bool(np.all(t_out == load.start_s[step]))  # then the run's step-start voltages are the report
+        weak = weak_group_fraction(params)
+        if weak != 1.0:  # the weak series group: the same cell with its electrode height scaled
+            sets = replace(sets, height=np.asarray(sets.height, dtype=float) * np.array([1.0, weak]))
         runs = run_cells(model, modal, duration_s, cell_current_a, c_n0_mol_m3=c_n0, c_p0_mol_m3=c_p0,
                          temperature_k=temperature_k, sets=sets, backend=self.backend, keep_states=not on_starts,
                          diffusivity_temperature=self._diffusivity_table(params, model, temperature_k))
-        end_time_s = float(runs.end_time_s[0])
-        keep = t_out < end_time_s if runs.reached_cutoff[0] else t_out <= end_time_s
+        first = int(np.argmin(runs.end_time_s))  # the pack ends with the group that ends first
+        end_time_s = float(runs.end_time_s[first])
+        reached = bool(runs.reached_cutoff[first])
+        keep = t_out < end_time_s if reached else t_out <= end_time_s
         t_out = t_out[keep]
         cell_temperature_k = None
         if on_starts:
-            v_cell = runs.start_voltage_v[0, step[keep]]
+            v_cells = runs.start_voltage_v[:, step[keep]]
             if model.thermal is not None:
                 cell_temperature_k = runs.extra["temperature_k"][0, step[keep]]
         else:
-            v_cell = voltages_at_times(model, runs, modal, duration_s, cell_current_a, t_out)[0]
+            v_cells = voltages_at_times(model, runs, modal, duration_s, cell_current_a, t_out)
             if model.thermal is not None:
                 cell_temperature_k = temperatures_at_times(runs, modal, t_out)[0]
         engine_s = time.perf_counter() - t_engine
         i_pack = load.current_at(t_out)
         r_eq = _series_resistance_ohm(params, temperature_k if cell_temperature_k is None else cell_temperature_k)
-        v_pack = pack_voltage_v(v_cell, i_pack, series=params.series, r_eq_ohm=r_eq)
+        v_pack = pack_voltage_v(v_cells[0], i_pack, series=params.series, r_eq_ohm=r_eq,
+                                weak_cell_voltage_v=v_cells[1] if len(v_cells) > 1 else None)
         if not np.all(np.isfinite(v_pack)):
             raise SimulationError("engine simulation produced non-finite voltages")
         return PackSimResult(
             time_s=t_out,
             pack_voltage_v=v_pack,
             pack_current_a=i_pack,
-            min_cell_voltage_v=v_cell,
-            termination="cell_cutoff" if runs.reached_cutoff[0] else "end_of_load",
+            min_cell_voltage_v=np.min(v_cells, axis=0),
+            termination="cell_cutoff" if reached else "end_of_load",
             end_time_s=end_time_s,
             seconds=time.perf_counter() - tic,
             extra={"r_eq_ohm": r_eq, "engine_seconds": engine_s, "engine_backend": runs.extra["backend"],
