@@ -73,7 +73,10 @@ def test_node_params_file_loads_into_the_nodes(path: Path, ros_context: Context)
         assert monitor.config.max_voltage_v == mon["max_voltage_v"]
         assert monitor.config.min_temperature_k == pytest.approx(mon["min_temperature_c"] + 273.15)
         assert math.isnan(predictor.config.cutoff_voltage_v)  # 0 in the file = from the pack params
-        assert predictor.core.cutoff_voltage_v in (13.30, 45.00, 2.50)
+        pack = predictor.core.params
+        expected_cutoff_v = pack.thresholds.get("runtime_cutoff_voltage_v", pack.pack_info["min_voltage_v"])
+        assert predictor.core.cutoff_voltage_v == pytest.approx(expected_cutoff_v)
+        assert predictor.core.cutoff_voltage_v in (13.30, 45.00, 2.50, 18.00)  # the shipped packs' cut-offs
     finally:
         monitor.destroy_node()
         predictor.destroy_node()
