@@ -470,8 +470,10 @@ class PredictorCore:
             note = f"; a {peak:.2f} A load peak now would reach the cut-off{note}"
         p10, p90 = interval(pred.remaining_s, *spread.total()) if spread is not None else (math.nan, math.nan)
         band = f" (P10..P90 {p10 / 60:.1f}..{p90 / 60:.1f} min)" if spread is not None else ""
+        until = (f"a cell reaches its {self.params.cell_lower_cutoff_v:.2f} V cut-off (pack above {cutoff:.2f} V)"
+                 if pred.cell_limited and self.params is not None else f"{cutoff:.2f} V")
         reason = (f"{pred.remaining_s / 60:.1f} min{band} at {load_text}{peaks}, {temp - 273.15:.1f} degC until "
-                  f"{cutoff:.2f} V ({pred.limited_by}){note}")
+                  f"{until} ({pred.limited_by}){note}")
         return RuntimeStatus(stamp, pred.remaining_s, avg, temp, soc, cutoff, True, STATUS_OK, reason, p10, p90,
                              spread)
 

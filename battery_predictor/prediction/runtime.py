@@ -47,6 +47,9 @@ class RuntimePrediction:
         Time in s at which the average load alone reaches the cut-off (NaN beyond the horizon).
     charge_to_end_ah : float
         Charge the average load draws until then, Ah.
+    cell_limited : bool
+        True when a cell's lower cut-off (e.g. a weak series group's), not the pack threshold, ends
+        the average-load run.
     """
 
     remaining_s: float
@@ -57,6 +60,7 @@ class RuntimePrediction:
     limited_by: str
     average_end_s: float = math.nan
     charge_to_end_ah: float = math.nan
+    cell_limited: bool = False
 
 
 def time_to_voltage_s(time_s: np.ndarray, voltage_v: np.ndarray, threshold_v: float) -> float | None:
@@ -305,15 +309,17 @@ def predict_remaining_runtime(runner: PackModel, voltage_v: float, current_a: fl
     assumed_a = path.current_at(0.0)
     t_avg = run_end_s(run, cutoff_voltage_v)
     ends = (t_avg, path_charge_ah(path, t_avg)) if t_avg is not None else (math.nan, math.nan)
+    cell_limited = bool(run.reached_cutoff) and time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v) is None
     if peak_current_a is not None and peak_current_a > average_current_a:
         t_peak = peak_crossing_s(runner, cal.start, path, float(peak_current_a) / average_current_a, temperature_k,
                                  cutoff_voltage_v, run, settle_s=peak_duration_s)
         if t_peak is not None:
-            return RuntimePrediction(t_peak, cal, assumed_a, temperature_k, cutoff_voltage_v, "peak_cutoff", *ends)
+            return RuntimePrediction(t_peak, cal, assumed_a, temperature_k, cutoff_voltage_v, "peak_cutoff", *ends,
+                                     cell_limited=cell_limited)
     t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
     if t_pack is not None:
         return RuntimePrediction(t_pack, cal, assumed_a, temperature_k, cutoff_voltage_v, "pack_cutoff", *ends)
     if run.reached_cutoff:
         return RuntimePrediction(run.end_time_s, cal, assumed_a, temperature_k, cutoff_voltage_v, "cell_cutoff",
-                                 *ends)
+                                 *ends, cell_limited=True)
     return RuntimePrediction(horizon_s, cal, assumed_a, temperature_k, cutoff_voltage_v, "horizon")

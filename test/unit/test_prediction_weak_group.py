@@ -47,12 +47,14 @@ def test_weak_group_shortens_the_runtime_by_about_its_capacity_fraction(runners)
     runtime_plain = predict_remaining_runtime(plain, **kwargs)
     runtime_weak = predict_remaining_runtime(weak, **kwargs)
     assert runtime_plain.limited_by == runtime_weak.limited_by == "cell_cutoff"
+    assert runtime_weak.cell_limited and runtime_plain.cell_limited
     assert runtime_weak.remaining_s / runtime_plain.remaining_s == pytest.approx(WEAK_FRACTION, abs=0.03)
     # at the robot's pack cut-off the weak group's knee still ends the run earlier
     at_13v3 = {**kwargs, "cutoff_voltage_v": 13.30}
     ratio = (predict_remaining_runtime(weak, **at_13v3).remaining_s
              / predict_remaining_runtime(plain, **at_13v3).remaining_s)
     assert WEAK_FRACTION - 0.03 < ratio < 0.97
+    assert not predict_remaining_runtime(plain, **at_13v3).cell_limited  # the pack threshold ends that run
 
 
 def test_weak_group_runtime_matches_the_fast_simulator(weak_params, runners):
