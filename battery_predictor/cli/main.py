@@ -69,12 +69,20 @@ def _record_flags(parser: argparse.ArgumentParser) -> None:
                 _record_flags(sub)
 
 
+def one_line_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                     line: str | None = None) -> str:
+    """A warning as the command line shows it: one line, no source file or code line."""
+    return f"battery-predictor: warning: {message}\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the process exit code."""
     os.environ.setdefault("TQDM_DISABLE", "0")
     warnings.filterwarnings("ignore", category=DeprecationWarning)
     parser = build_parser()
     args = parser.parse_args(argv)
+    shown_as = warnings.formatwarning
+    warnings.formatwarning = one_line_warning
     try:
         with cli_flags(getattr(args, "cli_flags", {})):
             return int(args.func(args) or 0)
@@ -90,6 +98,8 @@ def main(argv: list[str] | None = None) -> int:
         except OSError:
             pass
         return 0
+    finally:
+        warnings.formatwarning = shown_as
 
 
 if __name__ == "__main__":

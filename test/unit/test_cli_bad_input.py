@@ -319,3 +319,16 @@ def test_replay_progress_counts_bag_minutes(monkeypatch):
             on_step(minute * 60 * 10**9)
     assert re.search(r"replay:.*\b150.0/300.0 \[", terminal.getvalue()), terminal.getvalue()
     assert "bag min" in terminal.getvalue()
+
+
+def test_warnings_print_as_one_line_without_the_source_and_main_restores_the_format():
+    from battery_predictor.cli import main as cli_main
+
+    text = cli_main.one_line_warning(UserWarning("data.csv: starts above the cut-off"), UserWarning, "/x/y.py", 93,
+                                     "req = replace(req)")
+    assert text == "battery-predictor: warning: data.csv: starts above the cut-off\n"
+    import warnings
+
+    before = warnings.formatwarning
+    assert cli_main.main(["simulate", "--params", "no_such_params.yaml", "--data", "no_such.csv"]) == 2
+    assert warnings.formatwarning is before  # the command line's format does not leak into a caller
