@@ -6,6 +6,12 @@ VENV := .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.setup-stamp
 PYTEST_ARGS ?=
+# make test / test-fast run the tests in worker processes, one per core (pytest-xdist). A worker gets whole test
+# files (loadfile: module fixtures and module-level caches are made once), in collection order
+# (--no-loadscope-reorder; xdist would otherwise hand out the files with the most tests first, the quick unit
+# files, and leave the long test/integration files for the end). PYTEST_XDIST= (empty) runs the tests in this
+# process, as a bare `pytest` or a single test (`.venv/bin/python -m pytest test/unit/test_x.py`) does.
+PYTEST_XDIST ?= -n auto --dist loadfile --no-loadscope-reorder
 
 .PHONY: setup demo test test-fast test-services lint bags benchmarks clean
 
@@ -48,14 +54,14 @@ test-services:
 test: setup test-services
 	$(VENV)/bin/ruff check battery_predictor test benchmarks
 	$(VPY) -m mypy
-	$(VPY) -m pytest $(PYTEST_ARGS)
+	$(VPY) -m pytest $(PYTEST_XDIST) $(PYTEST_ARGS)
 
 # The inner loop: ruff, mypy and the ROS-free unit tests (solver-heavy tests belong in test/integration).
 # `make test` stays the full suite CI runs.
 test-fast: setup
 	$(VENV)/bin/ruff check battery_predictor test benchmarks
 	$(VPY) -m mypy
-	$(VPY) -m pytest test/unit $(PYTEST_ARGS)
+	$(VPY) -m pytest $(PYTEST_XDIST) test/unit $(PYTEST_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check battery_predictor test benchmarks

@@ -1,8 +1,18 @@
-"""Fixtures shared by every test directory (the shipped Temi params, a synthetic Temi discharge)."""
+"""Fixtures shared by every test directory (the shipped Temi params, a synthetic Temi discharge).
+
+``make test`` runs the suite in worker processes (pytest-xdist, ``-n auto --dist loadfile``): a
+session fixture is made once per worker, so the expensive ones are made once per run and shared
+through a file under the run's temporary directory (:func:`_once_per_run`).
+"""
 
 from __future__ import annotations
 
+import fcntl
+import os
+import pickle
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -35,16 +45,50 @@ def _synthesize(params, seed: int) -> Recording:
                      temperature_k=np.full(res.time_s.size, 298.15), source=f"synthetic-{seed}")
 
 
+def _once_per_run(tmp_path_factory: pytest.TempPathFactory, name: str, make: Callable[[], Any]) -> Any:
+    """``make()``, computed once per test run and shared by the xdist workers (in one process: just ``make()``).
+
+    The first worker to ask computes it under an exclusive lock and leaves it pickled in the directory all
+    workers' temporary directories share; the others wait on the lock and load it.
+    """
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        return make()
+    shared = tmp_path_factory.getbasetemp().parent
+    path = shared / f"{name}.pickle"
+    with open(shared / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if path.is_file():
+            return pickle.loads(path.read_bytes())
+        value = make()
+        partial = path.with_suffix(".partial")
+        partial.write_bytes(pickle.dumps(value))
+        os.replace(partial, path)
+        return value
+
+
+@pytest.fixture(scope="session")
+def process_workers_args() -> list[str]:
+    """``--workers N`` for a CLI that starts a process pool of its own (diagnose): the CPUs shared out among the
+    xdist workers, so that two workers running diagnoses do not start twice as many processes as there are
+    cores; empty (the command's default) when the tests run in one process."""
+    count = os.environ.get("PYTEST_XDIST_WORKER_COUNT")
+    if count is None:
+        return []
+    return ["--workers", str(max(1, len(os.sched_getaffinity(0)) // int(count)))]
+
+
 @pytest.fixture(scope="session")
 def temi_params():
     return load_params(REPO / "params" / "temi.yaml")
 
 
 @pytest.fixture(scope="session")
-def synthetic_temi(temi_params):
+def synthetic_temi(temi_params, tmp_path_factory):
     """(truth values, truth params, training recording, held-out recording) made by liionpack."""
     truth = temi_params.with_values(SYNTHETIC_TRUTH)
-    return dict(SYNTHETIC_TRUTH), truth, _synthesize(truth, 11), _synthesize(truth, 12)
+    train, held_out = _once_per_run(tmp_path_factory, "synthetic_temi",
+                                    lambda: (_synthesize(truth, 11), _synthesize(truth, 12)))
+    return dict(SYNTHETIC_TRUTH), truth, train, held_out
 
 
 @pytest.fixture(scope="session")

@@ -49,11 +49,11 @@ def test_every_run_uses_both_packs_and_every_cause():
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("cause", CAUSES)
-def test_diagnose_names_the_hidden_effect(tmp_path, cause, seed):
+def test_diagnose_names_the_hidden_effect(tmp_path, cause, seed, process_workers_args):
     pack = pack_for(cause, seed)
     sc = make_scenario(cause, pack, seed, tmp_path)
     cmd = [CLI, "diagnose", "--params", str(sc.params_path), "--reference", str(sc.reference_csv),
-           "--data", str(sc.observed_csv), "--json", "--quiet"]
+           "--data", str(sc.observed_csv), "--json", "--quiet", *process_workers_args]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1200)
     assert proc.returncode == 0, proc.stderr[-3000:]
     lines = [ln for ln in proc.stdout.splitlines() if ln.strip()]

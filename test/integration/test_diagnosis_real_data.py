@@ -22,11 +22,11 @@ CLI = str(Path(sys.executable).parent / "battery-predictor")
 
 @pytest.mark.slow
 @pytest.mark.skipif(not DATA.is_dir(), reason="measured data not available (../shared/data)")
-def test_lgm50_10degC_discharges_name_temperature():
+def test_lgm50_10degC_discharges_name_temperature(process_workers_args):
     refs = [str(DATA / f"cc_T25C_{r}.csv") for r in ("0p1C", "0p5C", "1C", "2C")]
     obs = [str(DATA / f"cc_T10C_{r}.csv") for r in ("0p5C", "1C", "2C")]
     cmd = [CLI, "diagnose", "--params", str(PARAMS), "--reference", *refs, "--data", *obs, "--trim",
-           "--duplicate-times", "keep_last", "--json", "--quiet"]
+           "--duplicate-times", "keep_last", "--json", "--quiet", *process_workers_args]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1200)
     assert proc.returncode == 0, proc.stderr[-3000:]
     result = json.loads(proc.stdout)

@@ -12,29 +12,52 @@ from battery_predictor.params import load_params
 from battery_predictor.profiles.ranger import longest_route, route_profile
 from battery_predictor.profiles.temi import generate_usage_profile
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
+from battery_predictor.simulation.base import PackSimResult
 from battery_predictor.simulation.fast import FastPackSimulator
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
 
 
-def _compare(params, load, simulator: str = "fast", **req_kwargs):
-    """``simulator`` and liionpack on the same 10 s-resampled load (liionpack steps at 10 s)."""
+#: liionpack's answer per case, simulated once for the fast-path and the engine test of the case (the slow half).
+_LIIONPACK: dict[str, PackSimResult] = {}
+
+
+def _compare(case: str, simulator: str = "fast"):
+    """``simulator`` and liionpack on the case's 10 s-resampled load (liionpack steps at 10 s)."""
+    params, load, req_kwargs = _CASES[case]()
     stepped = load.resample(10.0)
     req = SimulationRequest(load=stepped, **req_kwargs)
     fast = get_simulator(simulator).simulate(params, req)
-    ref = get_simulator("liionpack").simulate(params, req)
+    if case not in _LIIONPACK:
+        _LIIONPACK[case] = get_simulator("liionpack").simulate(params, req)
+    ref = _LIIONPACK[case]
     n = min(len(fast.time_s), len(ref.time_s))
     # the final sample sits on the cut-off knee, where one step of timing dominates the difference
     diff = fast.pack_voltage_v[: n - 1] - ref.pack_voltage_v[: n - 1]
     return fast, ref, float(np.sqrt(np.mean(diff**2)))
 
 
-@pytest.mark.slow
-def test_fast_path_matches_liionpack_on_temi_usage_profile_to_cutoff():
+def _temi_usage_case():
+    """The shipped Temi pack from 12 % SOC under a 4 h usage profile (seed 3): down to the cut-off."""
     params = load_params(PARAMS / "temi.yaml")
     profile = generate_usage_profile(seed=3, max_duration_s=4 * 3600)
-    fast, ref, rms_v = _compare(params, StepLoad.from_profile(profile), initial_soc=0.12)
+    return params, StepLoad.from_profile(profile), {"initial_soc": 0.12}
+
+
+def _ranger_route_case():
+    """The shipped Ranger pack from 50 % SOC over the longest route at 60 kg twice (seed 4): to the end of the load."""
+    params = load_params(PARAMS / "ranger_mini.yaml")
+    profile = route_profile(longest_route(60.0), seed=4)
+    return params, StepLoad.from_profile(profile.concatenate(profile)), {"initial_soc": 0.5}
+
+
+_CASES = {"temi_usage": _temi_usage_case, "ranger_route": _ranger_route_case}
+
+
+@pytest.mark.slow
+def test_fast_path_matches_liionpack_on_temi_usage_profile_to_cutoff():
+    fast, ref, rms_v = _compare("temi_usage")
     assert ref.termination == "cell_cutoff" and fast.termination == "cell_cutoff"
     assert rms_v <= 0.005
     assert abs(fast.end_time_s - ref.end_time_s) / ref.end_time_s <= 0.005
@@ -42,10 +65,7 @@ def test_fast_path_matches_liionpack_on_temi_usage_profile_to_cutoff():
 
 @pytest.mark.slow
 def test_fast_path_matches_liionpack_on_ranger_longest_route():
-    params = load_params(PARAMS / "ranger_mini.yaml")
-    profile = route_profile(longest_route(60.0), seed=4)
-    load = StepLoad.from_profile(profile.concatenate(profile))
-    fast, ref, rms_v = _compare(params, load, initial_soc=0.5)
+    fast, ref, rms_v = _compare("ranger_route")
     assert rms_v <= 0.005
     assert fast.termination == ref.termination == "end_of_load"
 
@@ -53,9 +73,7 @@ def test_fast_path_matches_liionpack_on_ranger_longest_route():
 @pytest.mark.slow
 def test_engine_matches_liionpack_on_temi_usage_profile_to_cutoff():
     """Issue 18: the engine within 5 mV RMS and 0.5 % of the time to cut-off of liionpack (identical cells)."""
-    params = load_params(PARAMS / "temi.yaml")
-    profile = generate_usage_profile(seed=3, max_duration_s=4 * 3600)
-    engine, ref, rms_v = _compare(params, StepLoad.from_profile(profile), "engine", initial_soc=0.12)
+    engine, ref, rms_v = _compare("temi_usage", "engine")
     assert "engine_fallback" not in engine.extra
     assert ref.termination == "cell_cutoff" and engine.termination == "cell_cutoff"
     assert rms_v <= 0.005
@@ -64,10 +82,7 @@ def test_engine_matches_liionpack_on_temi_usage_profile_to_cutoff():
 
 @pytest.mark.slow
 def test_engine_matches_liionpack_on_ranger_longest_route():
-    params = load_params(PARAMS / "ranger_mini.yaml")
-    profile = route_profile(longest_route(60.0), seed=4)
-    engine, ref, rms_v = _compare(params, StepLoad.from_profile(profile.concatenate(profile)), "engine",
-                                  initial_soc=0.5)
+    engine, ref, rms_v = _compare("ranger_route", "engine")
     assert "engine_fallback" not in engine.extra
     assert rms_v <= 0.005
     assert engine.termination == ref.termination == "end_of_load"
