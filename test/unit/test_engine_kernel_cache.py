@@ -67,3 +67,22 @@ def test_old_kernel_files_are_pruned_with_their_cached_code(tmp_path):
     kept = sorted(f.stem for f in tmp_path.glob("engine_kernel_*.py"))
     assert len(kept) == MAX_FILES - 1 and kept[0] == f"engine_kernel_{4:03d}"
     assert len(list((tmp_path / "__pycache__").glob("*.nbi"))) == MAX_FILES - 1
+
+
+def test_a_kernel_file_another_process_published_first_is_never_rewritten(tmp_path):
+    import os
+
+    from battery_predictor.simulation.engine.kernel_module import _publish
+
+    path = tmp_path / "engine_kernel_x.py"
+    path.write_text("first\n")
+    os.utime(path, (1_000_000_000, 1_000_000_000))
+    tmp = tmp_path / "late.tmp"
+    tmp.write_text("second\n")
+    _publish(tmp, path)
+    assert path.read_text() == "first\n" and path.stat().st_mtime == 1_000_000_000  # Numba's cache key kept
+    assert not tmp.exists()
+    fresh = tmp_path / "fresh.tmp"
+    fresh.write_text("new\n")
+    _publish(fresh, tmp_path / "engine_kernel_y.py")
+    assert (tmp_path / "engine_kernel_y.py").read_text() == "new\n" and not fresh.exists()

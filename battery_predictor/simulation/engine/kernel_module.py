@@ -208,6 +208,20 @@ def _prune(directory: Path, keep: int = MAX_FILES - 1) -> None:
                 pass
 
 
+def _publish(tmp: Path, path: Path) -> None:
+    """Move the written ``tmp`` to ``path`` unless another process published it first (never overwrite:
+    a rewritten file gets a new stamp, which invalidates every process's compiled cache)."""
+    try:
+        os.link(tmp, path)  # atomic, and fails when the file exists
+    except FileExistsError:
+        pass
+    except OSError:  # no hard links on this file system
+        if not path.exists():
+            os.replace(tmp, path)
+            return
+    tmp.unlink(missing_ok=True)
+
+
 def kernel_module(numba, voltage_source: str) -> ModuleType | SimpleNamespace:
     """The compiled functions of :func:`module_source` for a printed voltage, cached on disk where possible.
 
@@ -227,7 +241,7 @@ def kernel_module(numba, voltage_source: str) -> ModuleType | SimpleNamespace:
         _prune(directory)
         with tempfile.NamedTemporaryFile("w", dir=directory, suffix=".tmp", delete=False) as tmp:
             tmp.write(text)
-        os.replace(tmp.name, path)
+        _publish(Path(tmp.name), path)
     spec = importlib.util.spec_from_file_location(f"battery_predictor_engine_kernel_{digest}", path)
     assert spec is not None and spec.loader is not None  # a .py file we just wrote
     if spec.name in sys.modules:
