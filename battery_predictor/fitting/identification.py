@@ -24,7 +24,7 @@ from battery_predictor.errors import BatteryPredictorError, SimulationError
 from battery_predictor.fitting.cost import r2_mod, rmse_v
 from battery_predictor.fitting.identifiable import Coordinate, electrode_basis, pybamm_values
 from battery_predictor.params import PackParams
-from battery_predictor.recording import Recording
+from battery_predictor.recording import Recording, ends_at_cutoff
 from battery_predictor.simulation.base import PackSimResult, PackSimulator
 
 if TYPE_CHECKING:
@@ -80,14 +80,41 @@ class EvaluationLog:
             self.best_unit = np.array(unit, dtype=float)
 
 
+def padding_s(rec: Recording, extend_fraction: float) -> float:
+    """How far past its end (s) a recording is simulated and compared: R2_mod's padding, or none.
+
+    A recording that ends at its cut-off (:func:`~battery_predictor.recording.ends_at_cutoff`) is
+    padded by ``extend_fraction`` of its duration with its minimum voltage (Eq. 2 of the seed
+    paper), so a model that would run longer shows it. Any other recording (a working day that
+    stops at 40 % SOC, a discharge that ends in a rest) is compared on its samples only: padding it
+    would ask the model to be empty where the recording stopped, which biases the identified
+    capacity low (a far-truth Temi day that ended at 3.5 V per cell: reference RMSE 36 mV with the
+    padding, 6 mV without, docs/findings.md).
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    extend_fraction : float
+        Padding as a fraction of the recording's duration when it ends at its cut-off.
+
+    Returns
+    -------
+    float
+        Padding in s (0 when the recording does not end at its cut-off).
+    """
+    return extend_fraction * rec.duration_s if ends_at_cutoff(rec) else 0.0
+
+
 @dataclass(frozen=True)
 class ResidualGrid:
-    """Fixed comparison grid of one recording (measurement grid extended past its end).
+    """Fixed comparison grid of one recording (measurement grid extended past its end when it ends at its cut-off).
 
     Attributes
     ----------
     time_s : numpy.ndarray
-        Relative measurement times, extended with the median interval to ``(1 + extend) x duration``.
+        Relative measurement times, extended with the median interval by the padding
+        (:func:`padding_s`).
     measured_v : numpy.ndarray
         Measured voltage, padded with its minimum after the end (Eq. 2 of the seed paper).
     u_min_v : float
@@ -172,7 +199,9 @@ class IdentificationProblem:
     space : list of Coordinate
         From :func:`~battery_predictor.fitting.identifiable.default_space`.
     extend_fraction : float
-        Simulations run this fraction of each recording's duration past its end (late ends show).
+        Simulations of a recording that ends at its cut-off run this fraction of its duration past
+        its end, compared with its minimum voltage (late ends show); others are not padded
+        (:func:`padding_s`).
     """
 
     params: PackParams
@@ -184,7 +213,7 @@ class IdentificationProblem:
     def __post_init__(self) -> None:
         n = len(self.recordings)
         self._basis = electrode_basis(self.params)
-        self._grids = [ResidualGrid.for_recording(r, self.extend_fraction * r.duration_s, n) for r in self.recordings]
+        self._grids = [ResidualGrid.for_recording(r, padding_s(r, self.extend_fraction), n) for r in self.recordings]
 
     @property
     def names(self) -> list[str]:
@@ -212,7 +241,7 @@ class IdentificationProblem:
         for rec, vals in zip(self.recordings, values, strict=True):
             params = self.params.with_values(vals)
             req = request_for_recording(params, rec, initial_state="params",
-                                        extend_s=self.extend_fraction * rec.duration_s)
+                                        extend_s=padding_s(rec, self.extend_fraction))
             res = self.simulator.simulate(params, req)
             if res.time_s.size < 2:
                 raise SimulationError(f"{rec.source}: simulation ended immediately (cut-off at start)")
@@ -504,7 +533,7 @@ def raw_identifiability(problem: FitProblem, space: Sequence[FitParameter], valu
     from battery_predictor.fitting.identifiability import analyse
 
     n_rec = len(problem.recordings)
-    grids = [ResidualGrid.for_recording(r, problem.extend_fraction * r.duration_s, n_rec) for r in problem.recordings]
+    grids = [ResidualGrid.for_recording(r, padding_s(r, problem.extend_fraction), n_rec) for r in problem.recordings]
 
     def residuals(vals: dict[str, float]) -> np.ndarray:
         results: Sequence[PackSimResult | None]
