@@ -121,12 +121,16 @@ class ResidualGrid:
         Minimum measured voltage.
     weight : float
         ``1 / sqrt(n_recordings * sum (U - mean U)^2)`` over the measured samples.
+    ends_at_cutoff : bool
+        Whether the recording ends at its cut-off (:func:`~battery_predictor.recording.ends_at_cutoff`):
+        only then is a prediction below ``U_min`` clipped to it (Eq. 1's stand-in).
     """
 
     time_s: np.ndarray
     measured_v: np.ndarray
     u_min_v: float
     weight: float
+    ends_at_cutoff: bool = True
 
     @classmethod
     def for_recording(cls, rec: Recording, extend_s: float, n_recordings: int) -> ResidualGrid:
@@ -138,7 +142,7 @@ class ResidualGrid:
         extra = np.arange(t[-1] + dt, t[-1] + extend_s + 0.5 * dt, dt) if extend_s > 0 else np.empty(0)
         ss_tot = float(np.sum((u - u.mean()) ** 2)) or 1.0
         return cls(np.concatenate([t, extra]), np.concatenate([u, np.full(extra.size, u_min)]), u_min,
-                   1.0 / math.sqrt(n_recordings * ss_tot))
+                   1.0 / math.sqrt(n_recordings * ss_tot), ends_at_cutoff(rec))
 
     def residuals(self, result: PackSimResult | None) -> np.ndarray:
         """Weighted ``measured - predicted``: a continuous stand-in for R2_mod's comparison.
@@ -146,7 +150,8 @@ class ResidualGrid:
         The prediction is clipped at ``U_min`` from below (rather than truncated at its first
         sample below it, Eq. 1, which jumps whenever a load peak dips below ``U_min``) and padded
         with ``U_min`` after its end; a simulation that stops at its cut-off between two report
-        times is continued linearly to ``U_min`` at its end time.
+        times is continued linearly to ``U_min`` at its end time. A recording that does not end
+        at its cut-off is compared as it is: a prediction below its ``U_min`` is an error there.
         """
         pred = np.full(self.time_s.size, self.u_min_v)
         if result is not None and result.time_s.size >= 2:
@@ -155,7 +160,8 @@ class ResidualGrid:
                 tp, up = np.append(tp, result.end_time_s), np.append(up, min(up[-1], self.u_min_v))
             pred = np.interp(self.time_s, tp, up, right=self.u_min_v)
             pred[self.time_s > tp[-1]] = self.u_min_v
-            pred = np.maximum(pred, self.u_min_v)
+            if self.ends_at_cutoff:
+                pred = np.maximum(pred, self.u_min_v)
         return self.weight * (self.measured_v - pred)
 
 
@@ -263,7 +269,7 @@ class IdentificationProblem:
         r2s, rmses = [], []
         for rec, res in zip(self.recordings, results, strict=True):
             t = rec.relative_time_s
-            r2s.append(r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v))
+            r2s.append(r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v, ends_at_cutoff(rec)))
             rmses.append(1e3 * rmse_v(t, rec.voltage_v, res.time_s, res.pack_voltage_v))
         return CandidateScore(float(np.mean(r2s)), r2s, rmses, results, values)
 

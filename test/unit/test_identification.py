@@ -21,6 +21,7 @@ from battery_predictor.fitting.identifiable import (
 from battery_predictor.fitting.identification import (
     CandidateScore,
     IdentificationProblem,
+    ResidualGrid,
     distinct_best,
     identifiability_of,
     identify,
@@ -35,6 +36,7 @@ from battery_predictor.ocp import initial_stoichiometries, ocp_curves
 from battery_predictor.params import load_params
 from battery_predictor.recording import Recording, ends_at_cutoff
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
+from battery_predictor.simulation.base import PackSimResult
 
 REPO = Path(__file__).resolve().parents[2]
 #: The pack models in params/ (the other YAML files there hold load profiles and station data).
@@ -347,6 +349,26 @@ def test_only_a_recording_that_ends_at_its_cutoff_is_padded():
     assert padding_s(resting, 0.2) == 0.0
     stopped_high = Recording(t, np.linspace(4.1, 3.0, t.size)[::-1], np.full(t.size, 2.0))  # last voltage its maximum
     assert padding_s(stopped_high, 0.2) == 0.0
+
+
+def test_a_dip_below_the_minimum_counts_unless_the_recording_ended_at_its_cutoff():
+    t = np.arange(0.0, 600.0, 10.0)
+    v = np.linspace(4.1, 3.0, t.size)
+    dip = v.copy()
+    dip[30] = 2.9  # a load peak of the model below the recording's minimum (3.0 V)
+    sim = PackSimResult(t, dip, np.full(t.size, 2.0), dip, "end_of_load", float(t[-1]))
+    at_cutoff = ResidualGrid.for_recording(Recording(t, v, np.full(t.size, 2.0)), 0.0, 1)
+    assert at_cutoff.ends_at_cutoff
+    # Eq. 1's stand-in: the dip is clipped at U_min
+    assert at_cutoff.residuals(sim)[30] == pytest.approx(at_cutoff.weight * (v[30] - 3.0))
+    stopped = Recording(t, np.where(t < 300.0, v, v[30] + 0.05), np.where(t < 300.0, 2.0, 0.0))
+    grid = ResidualGrid.for_recording(stopped, 0.0, 1)
+    assert not grid.ends_at_cutoff
+    dip_stopped = np.asarray(stopped.voltage_v, dtype=float).copy()
+    dip_stopped[20] = grid.u_min_v - 0.2
+    r = grid.residuals(PackSimResult(t, dip_stopped, np.zeros(t.size), dip_stopped, "end_of_load", float(t[-1])))
+    assert r[20] == pytest.approx(grid.weight * (stopped.voltage_v[20] - grid.u_min_v + 0.2))  # not clipped
+    assert np.count_nonzero(r) == 1
 
 
 def test_a_day_that_stops_above_its_cutoff_leaves_only_the_noise_at_the_truth(panasonic):
