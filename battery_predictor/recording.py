@@ -79,3 +79,27 @@ class Recording:
             source=self.source,
             metadata=dict(self.metadata),
         )
+
+
+#: A recording is taken to end at its cut-off when its last voltage is within this fraction of
+#: its voltage range above its minimum and the last current is a discharge (under a varying
+#: load the lowest voltage may fall on an earlier high-current step).
+END_AT_MIN_FRACTION = 0.02
+
+
+def ends_at_cutoff(rec: Recording) -> bool:
+    """True when the recording ends at its minimum voltage while discharging (its runtime is defined).
+
+    Only such a recording says what the cell would have done after its end (it stopped at its
+    cut-off): the seed paper's R2_mod padding (Eq. 2, the measured voltage continued at its minimum)
+    and a simulation run past the end apply to it. A working day that stops at 40 % SOC, or ends
+    in a rest or a recharge, says nothing about later voltages.
+
+    Parameters
+    ----------
+    rec : Recording
+        Voltage in V, current in A (discharge positive).
+    """
+    v = np.asarray(rec.voltage_v, dtype=float)
+    span = float(v.max() - v.min())
+    return bool(span > 0 and v[-1] - v.min() <= END_AT_MIN_FRACTION * span and rec.current_a[-1] > 0)

@@ -33,11 +33,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--robots", nargs="+", choices=ROBOTS, default=list(ROBOTS))
     ap.add_argument("--effects", nargs="+", default=None)
     ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--json-dir", type=Path, default=None, help="keep each case's diagnose JSON here")
     args = ap.parse_args(argv)
     rows, right, total, claims_on_none, gains = [], 0, 0, 0, []
     print("| seed | robot | effect | magnitude | charging stop | named | gain (%) | baseline (mV) | reference RMSE (mV) | "
-          "time (s) |")
-    print("|---|---|---|---|---|---|---:|---:|---:|---:|")
+          "best candidate (gain %) | time (s) |")
+    print("|---|---|---|---|---|---|---:|---:|---:|---|---:|")
     for seed in args.seeds:
         for robot in args.robots:
             for effect in ROBOT_EFFECTS[robot]:
@@ -54,11 +55,18 @@ def main(argv: list[str] | None = None) -> int:
                     seconds = time.perf_counter() - tic
                 if proc.returncode != 0:
                     named, gain, base, ref = "error: " + proc.stderr.strip().splitlines()[-1][:80], 0.0, float("nan"), float("nan")
+                    best = ""
                 else:
                     out = json.loads(proc.stdout)
                     named, gain = out["cause"], out["gain_pct"]
                     base = out["baseline"]["heldout_rmse_mV"]
                     ref = (out.get("reference_fit") or {}).get("rmse_mV", float("nan"))
+                    scored = [c for c in out["candidates"] if c["cause"] != "none" and "not_applicable" not in c]
+                    top = max(scored, key=lambda c: c["gain_pct"], default=None)
+                    best = "" if top is None else f"{top['cause']} ({top['gain_pct']:.1f})"
+                    if args.json_dir:
+                        args.json_dir.mkdir(parents=True, exist_ok=True)
+                        (args.json_dir / f"{seed}_{robot}_{effect}.json").write_text(proc.stdout)
                 total += 1
                 right += named == effect
                 if effect == "none" and named != "none":
@@ -67,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
                     gains.append(gain)
                 mag = ", ".join(f"{k} {v:.3g}" for k, v in case.magnitude.items())
                 print(f"| {seed} | {robot} | {effect} | {mag} | {case.charging_stop} | {named} | {gain:.1f} | "
-                      f"{base:.1f} | {ref:.1f} | {seconds:.0f} |", flush=True)
+                      f"{base:.1f} | {ref:.1f} | {best} | {seconds:.0f} |", flush=True)
                 rows.append((seed, robot, effect, named))
     print(f"\nright cause: {right} of {total} ({100.0 * right / max(total, 1):.0f} %); claims on none: {claims_on_none}; "
           f"median held-out gain of the named effects: {statistics.median(gains) if gains else float('nan'):.1f} %")

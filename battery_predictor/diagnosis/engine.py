@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from battery_predictor.errors import InputDataError, SimulationError
 from battery_predictor.params import INTERCONNECT_KEYS, PackParams, cached_parameter_values
-from battery_predictor.recording import Recording
+from battery_predictor.recording import Recording, ends_at_cutoff
 from battery_predictor.simulation.cell_setup import (
     INPUT_SAFE_KEYS,
     build_model,
@@ -64,10 +64,6 @@ T_INIT = "Initial temperature [K]"
 OFFSET = "Current sensor offset [A]"
 #: Inputs of every build (state, temperature, the values the plain candidates change).
 BASE_INPUTS = (C_N0, C_P0, T_AMB, T_INIT, EPS_N, EPS_P, HEIGHT, OFFSET)
-#: A recording is taken to end at its cut-off when its last voltage is within this fraction of
-#: its voltage range above its minimum and the last current is a discharge (under a varying
-#: load the lowest voltage may fall on an earlier high-current step).
-_END_AT_MIN_FRACTION = 0.02
 #: A simulation of a recording stops at the cell's lower cut-off, or this far (V per cell) below the
 #: lowest cell voltage the recording measured, whichever is lower. The measured current kept flowing
 #: below the cut-off (cyclers that stop on charge or time, 1-10 s averages of a sub-second dip: the
@@ -141,13 +137,6 @@ class Observed:
 def model_cutoff_v(cutoff_cell_v: float, obs: Observed, series: int) -> float:
     """Cell voltage (V) at which a simulation of ``obs`` stops (see :data:`CUTOFF_MARGIN_V`)."""
     return min(float(cutoff_cell_v), float(np.min(obs.v)) / max(int(series), 1) - CUTOFF_MARGIN_V)
-
-
-def ends_at_cutoff(rec: Recording) -> bool:
-    """True when the recording ends at its minimum voltage while discharging."""
-    v = np.asarray(rec.voltage_v, dtype=float)
-    span = float(v.max() - v.min())
-    return bool(span > 0 and v[-1] - v.min() <= _END_AT_MIN_FRACTION * span and rec.current_a[-1] > 0)
 
 
 def window_average(rec: Recording, period_s: float) -> Recording:

@@ -29,7 +29,7 @@ class AlignedSignals:
 
 
 def align_for_r2_mod(measured_time_s: npt.ArrayLike, measured_v: npt.ArrayLike, predicted_time_s: npt.ArrayLike,
-                     predicted_v: npt.ArrayLike) -> AlignedSignals:
+                     predicted_v: npt.ArrayLike, ends_at_cutoff: bool = True) -> AlignedSignals:
     """Truncate, extend and interpolate as Eq. (1) and (2) of the seed paper.
 
     1. ``U_min = min_i U_i``; the prediction is truncated where it first falls below ``U_min``
@@ -40,12 +40,21 @@ def align_for_r2_mod(measured_time_s: npt.ArrayLike, measured_v: npt.ArrayLike, 
        prediction is padded after its end (so that a prediction ending early is penalised).
     3. The prediction is interpolated linearly onto the (extended) measurement grid.
 
+    Steps 1 and 2's late-end part hold for a recording that ends at its cut-off (the paper's
+    discharges): its ``U_min`` is where the cell stopped. A recording that stops above it (a working
+    day that ends at 40 % SOC, :func:`~battery_predictor.recording.ends_at_cutoff`) says nothing
+    about later voltages, and a load peak of the model may dip below its ``U_min`` without the model
+    having ended: with ``ends_at_cutoff=False`` the prediction is neither truncated nor compared past
+    the measurement's end (a prediction that ends early is still padded with ``U_min``).
+
     Parameters
     ----------
     measured_time_s, measured_v : array_like
         Measured times (s, increasing) and voltages (V).
     predicted_time_s, predicted_v : array_like
         Predicted times (s, increasing) and voltages (V); may be empty (treated as all ``U_min``).
+    ends_at_cutoff : bool
+        Whether the measurement ends at its cut-off (default: the paper's case).
     """
     t = np.asarray(measured_time_s, dtype=float)
     u = np.asarray(measured_v, dtype=float)
@@ -54,10 +63,10 @@ def align_for_r2_mod(measured_time_s: npt.ArrayLike, measured_v: npt.ArrayLike, 
     if t.size == 0:
         raise ValueError("no measured samples")
     u_min = float(np.min(u))
-    below = np.nonzero(up < u_min)[0]
+    below = np.nonzero(up < u_min)[0] if ends_at_cutoff else np.empty(0, dtype=int)
     if below.size:
         tp, up = tp[: below[0]], up[: below[0]]
-    t_max = max(float(t[-1]), float(tp[-1]) if tp.size else -np.inf)
+    t_max = max(float(t[-1]), float(tp[-1]) if tp.size and ends_at_cutoff else -np.inf)
     if t_max > t[-1]:
         dt = float(np.median(np.diff(t))) if t.size > 1 else max(t_max - t[-1], 1.0)
         extra = np.arange(t[-1] + dt, t_max + 0.5 * dt, dt)
@@ -72,13 +81,13 @@ def align_for_r2_mod(measured_time_s: npt.ArrayLike, measured_v: npt.ArrayLike, 
 
 
 def r2_mod(measured_time_s: npt.ArrayLike, measured_v: npt.ArrayLike, predicted_time_s: npt.ArrayLike,
-           predicted_v: npt.ArrayLike) -> float:
+           predicted_v: npt.ArrayLike, ends_at_cutoff: bool = True) -> float:
     """Modified R2 (Eq. 3) of a predicted against a measured voltage curve.
 
     ``R2_mod = 1 - sum (U_i - U~_i)^2 / sum (U_i - mean U)^2`` on the grid of
-    :func:`align_for_r2_mod`. 1 is perfect; it can be negative.
+    :func:`align_for_r2_mod` (``ends_at_cutoff``: see there). 1 is perfect; it can be negative.
     """
-    a = align_for_r2_mod(measured_time_s, measured_v, predicted_time_s, predicted_v)
+    a = align_for_r2_mod(measured_time_s, measured_v, predicted_time_s, predicted_v, ends_at_cutoff)
     ss_res = float(np.sum((a.measured_v - a.predicted_v) ** 2))
     ss_tot = float(np.sum((a.measured_v - np.mean(a.measured_v)) ** 2))
     if ss_tot == 0.0:

@@ -24,7 +24,7 @@ from battery_predictor.errors import BatteryPredictorError, SimulationError
 from battery_predictor.fitting.cost import r2_mod, rmse_v
 from battery_predictor.fitting.identifiable import Coordinate, electrode_basis, pybamm_values
 from battery_predictor.params import PackParams
-from battery_predictor.recording import Recording
+from battery_predictor.recording import Recording, ends_at_cutoff
 from battery_predictor.simulation.base import PackSimResult, PackSimulator
 
 if TYPE_CHECKING:
@@ -80,26 +80,57 @@ class EvaluationLog:
             self.best_unit = np.array(unit, dtype=float)
 
 
+def padding_s(rec: Recording, extend_fraction: float) -> float:
+    """How far past its end (s) a recording is simulated and compared: R2_mod's padding, or none.
+
+    A recording that ends at its cut-off (:func:`~battery_predictor.recording.ends_at_cutoff`) is
+    padded by ``extend_fraction`` of its duration with its minimum voltage (Eq. 2 of the seed
+    paper), so a model that would run longer shows it. Any other recording (a working day that
+    stops at 40 % SOC, a discharge that ends in a rest) is compared on its samples only: padding it
+    would ask the model to be empty where the recording stopped, which biases the identified
+    capacity low (a far-truth Temi day that ended at 3.5 V per cell: reference RMSE 36 mV with the
+    padding, 6 mV without, docs/findings.md).
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    extend_fraction : float
+        Padding as a fraction of the recording's duration when it ends at its cut-off.
+
+    Returns
+    -------
+    float
+        Padding in s (0 when the recording does not end at its cut-off).
+    """
+    return extend_fraction * rec.duration_s if ends_at_cutoff(rec) else 0.0
+
+
 @dataclass(frozen=True)
 class ResidualGrid:
-    """Fixed comparison grid of one recording (measurement grid extended past its end).
+    """Fixed comparison grid of one recording (measurement grid extended past its end when it ends at its cut-off).
 
     Attributes
     ----------
     time_s : numpy.ndarray
-        Relative measurement times, extended with the median interval to ``(1 + extend) x duration``.
+        Relative measurement times, extended with the median interval by the padding
+        (:func:`padding_s`).
     measured_v : numpy.ndarray
         Measured voltage, padded with its minimum after the end (Eq. 2 of the seed paper).
     u_min_v : float
         Minimum measured voltage.
     weight : float
         ``1 / sqrt(n_recordings * sum (U - mean U)^2)`` over the measured samples.
+    ends_at_cutoff : bool
+        Whether the recording ends at its cut-off (:func:`~battery_predictor.recording.ends_at_cutoff`):
+        only then is a prediction below ``U_min`` clipped to it (Eq. 1's stand-in).
     """
 
     time_s: np.ndarray
     measured_v: np.ndarray
     u_min_v: float
     weight: float
+    ends_at_cutoff: bool = True
 
     @classmethod
     def for_recording(cls, rec: Recording, extend_s: float, n_recordings: int) -> ResidualGrid:
@@ -111,7 +142,7 @@ class ResidualGrid:
         extra = np.arange(t[-1] + dt, t[-1] + extend_s + 0.5 * dt, dt) if extend_s > 0 else np.empty(0)
         ss_tot = float(np.sum((u - u.mean()) ** 2)) or 1.0
         return cls(np.concatenate([t, extra]), np.concatenate([u, np.full(extra.size, u_min)]), u_min,
-                   1.0 / math.sqrt(n_recordings * ss_tot))
+                   1.0 / math.sqrt(n_recordings * ss_tot), ends_at_cutoff(rec))
 
     def residuals(self, result: PackSimResult | None) -> np.ndarray:
         """Weighted ``measured - predicted``: a continuous stand-in for R2_mod's comparison.
@@ -119,7 +150,8 @@ class ResidualGrid:
         The prediction is clipped at ``U_min`` from below (rather than truncated at its first
         sample below it, Eq. 1, which jumps whenever a load peak dips below ``U_min``) and padded
         with ``U_min`` after its end; a simulation that stops at its cut-off between two report
-        times is continued linearly to ``U_min`` at its end time.
+        times is continued linearly to ``U_min`` at its end time. A recording that does not end
+        at its cut-off is compared as it is: a prediction below its ``U_min`` is an error there.
         """
         pred = np.full(self.time_s.size, self.u_min_v)
         if result is not None and result.time_s.size >= 2:
@@ -128,7 +160,8 @@ class ResidualGrid:
                 tp, up = np.append(tp, result.end_time_s), np.append(up, min(up[-1], self.u_min_v))
             pred = np.interp(self.time_s, tp, up, right=self.u_min_v)
             pred[self.time_s > tp[-1]] = self.u_min_v
-            pred = np.maximum(pred, self.u_min_v)
+            if self.ends_at_cutoff:
+                pred = np.maximum(pred, self.u_min_v)
         return self.weight * (self.measured_v - pred)
 
 
@@ -172,7 +205,9 @@ class IdentificationProblem:
     space : list of Coordinate
         From :func:`~battery_predictor.fitting.identifiable.default_space`.
     extend_fraction : float
-        Simulations run this fraction of each recording's duration past its end (late ends show).
+        Simulations of a recording that ends at its cut-off run this fraction of its duration past
+        its end, compared with its minimum voltage (late ends show); others are not padded
+        (:func:`padding_s`).
     """
 
     params: PackParams
@@ -184,7 +219,7 @@ class IdentificationProblem:
     def __post_init__(self) -> None:
         n = len(self.recordings)
         self._basis = electrode_basis(self.params)
-        self._grids = [ResidualGrid.for_recording(r, self.extend_fraction * r.duration_s, n) for r in self.recordings]
+        self._grids = [ResidualGrid.for_recording(r, padding_s(r, self.extend_fraction), n) for r in self.recordings]
 
     @property
     def names(self) -> list[str]:
@@ -212,7 +247,7 @@ class IdentificationProblem:
         for rec, vals in zip(self.recordings, values, strict=True):
             params = self.params.with_values(vals)
             req = request_for_recording(params, rec, initial_state="params",
-                                        extend_s=self.extend_fraction * rec.duration_s)
+                                        extend_s=padding_s(rec, self.extend_fraction))
             res = self.simulator.simulate(params, req)
             if res.time_s.size < 2:
                 raise SimulationError(f"{rec.source}: simulation ended immediately (cut-off at start)")
@@ -234,7 +269,7 @@ class IdentificationProblem:
         r2s, rmses = [], []
         for rec, res in zip(self.recordings, results, strict=True):
             t = rec.relative_time_s
-            r2s.append(r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v))
+            r2s.append(r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v, ends_at_cutoff(rec)))
             rmses.append(1e3 * rmse_v(t, rec.voltage_v, res.time_s, res.pack_voltage_v))
         return CandidateScore(float(np.mean(r2s)), r2s, rmses, results, values)
 
@@ -504,7 +539,7 @@ def raw_identifiability(problem: FitProblem, space: Sequence[FitParameter], valu
     from battery_predictor.fitting.identifiability import analyse
 
     n_rec = len(problem.recordings)
-    grids = [ResidualGrid.for_recording(r, problem.extend_fraction * r.duration_s, n_rec) for r in problem.recordings]
+    grids = [ResidualGrid.for_recording(r, padding_s(r, problem.extend_fraction), n_rec) for r in problem.recordings]
 
     def residuals(vals: dict[str, float]) -> np.ndarray:
         results: Sequence[PackSimResult | None]

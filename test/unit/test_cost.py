@@ -47,6 +47,17 @@ def test_prediction_ending_late_extends_measurement_with_u_min():
     assert r2_mod([0, 1, 2], [4.0, 3.0, 2.0], [0, 1, 2, 3], [4.0, 3.0, 3.0, 3.0]) == pytest.approx(1 - 2 / 2.75)
 
 
+def test_a_recording_that_stops_above_its_cutoff_is_neither_truncated_nor_extended():
+    # a working day that stopped at 3 V (not its cut-off): the prediction's dip to 1.5 V at t=1 is an error
+    # of 1.5 V there, not the end of the prediction; its continuation past t=2 is not compared
+    t, u = [0.0, 1.0, 2.0], [4.0, 3.0, 2.0]
+    assert r2_mod(t, u, [0.0, 1.0, 2.0, 3.0], [4.0, 1.5, 2.0, 3.0], ends_at_cutoff=False) == pytest.approx(1 - 2.25 / 2)
+    a = align_for_r2_mod(t, u, [0, 1, 2, 3], [4.0, 3.0, 3.0, 3.0], ends_at_cutoff=False)
+    np.testing.assert_allclose(a.time_s, t)
+    # a prediction that ends early is still padded with U_min (the model stopped before the data did)
+    assert r2_mod(t, u, [0.0], [4.0], ends_at_cutoff=False) == pytest.approx(0.5)
+
+
 def test_empty_prediction_is_all_u_min():
     # padded 2,2,2 against 4,3,2: SS_res = 4+1+0 = 5, SS_tot = 2 -> -1.5
     assert r2_mod([0, 1, 2], [4.0, 3.0, 2.0], [], []) == pytest.approx(-1.5)

@@ -21,9 +21,11 @@ from battery_predictor.fitting.identifiable import (
 from battery_predictor.fitting.identification import (
     CandidateScore,
     IdentificationProblem,
+    ResidualGrid,
     distinct_best,
     identifiability_of,
     identify,
+    padding_s,
     select_by_r2_mod,
     startup_trials,
     with_start,
@@ -32,8 +34,9 @@ from battery_predictor.fitting.resample import resample_windows
 from battery_predictor.fitting.space import fit_space
 from battery_predictor.ocp import initial_stoichiometries, ocp_curves
 from battery_predictor.params import load_params
-from battery_predictor.recording import Recording
+from battery_predictor.recording import Recording, ends_at_cutoff
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
+from battery_predictor.simulation.base import PackSimResult
 
 REPO = Path(__file__).resolve().parents[2]
 #: The pack models in params/ (the other YAML files there hold load profiles and station data).
@@ -336,3 +339,59 @@ def test_identifiability_of_a_parameter_the_data_do_not_touch_is_unbounded_not_a
     rep = analyse(["r", "d"], [1.0, 1e-3], [False, True], rng.normal(size=m), jac, [(0.0, 2.0), (1e-5, 1e-1)])
     assert rep.determined[1] is False
     assert math.isinf(rep.ci95_high[1]) and rep.ci95_low[1] <= 1e-3
+
+
+def test_only_a_recording_that_ends_at_its_cutoff_is_padded():
+    t = np.arange(0.0, 600.0, 10.0)
+    falling = Recording(t, np.linspace(4.1, 3.0, t.size), np.full(t.size, 2.0))  # discharged to its minimum
+    assert padding_s(falling, 0.2) == pytest.approx(0.2 * falling.duration_s)
+    resting = Recording(t, np.where(t < 500.0, np.linspace(4.1, 3.0, t.size), 3.3), np.where(t < 500.0, 2.0, 0.0))
+    assert padding_s(resting, 0.2) == 0.0
+    stopped_high = Recording(t, np.linspace(4.1, 3.0, t.size)[::-1], np.full(t.size, 2.0))  # last voltage its maximum
+    assert padding_s(stopped_high, 0.2) == 0.0
+
+
+def test_a_dip_below_the_minimum_counts_unless_the_recording_ended_at_its_cutoff():
+    t = np.arange(0.0, 600.0, 10.0)
+    v = np.linspace(4.1, 3.0, t.size)
+    dip = v.copy()
+    dip[30] = 2.9  # a load peak of the model below the recording's minimum (3.0 V)
+    sim = PackSimResult(t, dip, np.full(t.size, 2.0), dip, "end_of_load", float(t[-1]))
+    at_cutoff = ResidualGrid.for_recording(Recording(t, v, np.full(t.size, 2.0)), 0.0, 1)
+    assert at_cutoff.ends_at_cutoff
+    # Eq. 1's stand-in: the dip is clipped at U_min
+    assert at_cutoff.residuals(sim)[30] == pytest.approx(at_cutoff.weight * (v[30] - 3.0))
+    stopped = Recording(t, np.where(t < 300.0, v, v[30] + 0.05), np.where(t < 300.0, 2.0, 0.0))
+    grid = ResidualGrid.for_recording(stopped, 0.0, 1)
+    assert not grid.ends_at_cutoff
+    dip_stopped = np.asarray(stopped.voltage_v, dtype=float).copy()
+    dip_stopped[20] = grid.u_min_v - 0.2
+    r = grid.residuals(PackSimResult(t, dip_stopped, np.zeros(t.size), dip_stopped, "end_of_load", float(t[-1])))
+    assert r[20] == pytest.approx(grid.weight * (stopped.voltage_v[20] - grid.u_min_v + 0.2))  # not clipped
+    assert np.count_nonzero(r) == 1
+
+
+def test_a_day_that_stops_above_its_cutoff_leaves_only_the_noise_at_the_truth(panasonic):
+    """A working day that stops half-way and rests is not compared with its minimum voltage after its end.
+
+    The seed paper's padding (Eq. 2) would ask the true model to be empty where the day stopped: its
+    rest voltage after the end sits far above the day's minimum, and the identification would move the
+    capacity to make it so (docs/findings.md, second generator).
+    """
+    rng = np.random.default_rng(4)
+    truth = _far_truth(panasonic)
+    load = StepLoad.from_durations(np.append(rng.uniform(60.0, 240.0, 12), 900.0),
+                                   np.append(rng.uniform(0.5, 4.0, 12), 0.0))
+    sim = get_simulator("fast").simulate(panasonic.with_values(pybamm_values(panasonic, truth)[0]),
+                                         SimulationRequest(load=load, output_time_s=np.arange(0.0, load.end_s, 20.0)))
+    noise = 0.002
+    rec = Recording(sim.time_s, sim.pack_voltage_v + rng.normal(0.0, noise, sim.time_s.size),
+                    load.current_at(sim.time_s), source="half-day")
+    assert not ends_at_cutoff(rec)
+    problem = _problem(panasonic, rec)
+    r = problem.residuals(truth)
+    assert r.size == rec.time_s.size
+    weight = 1.0 / math.sqrt(float(np.sum((rec.voltage_v - rec.voltage_v.mean()) ** 2)))
+    # the noise and the current sampled every 20 s (the true model misses the load's edges); the padding
+    # would add the rest voltage's distance from the minimum over 20 % more samples (~50 mV here)
+    assert math.sqrt(float(r @ r) / r.size) / weight <= 3.0 * noise
