@@ -108,9 +108,10 @@ def run(args: argparse.Namespace) -> int:
     options = {"peak_source": args.peak_source, "load_model": args.load_model}
     config = PredictorConfig(params_file=str(params.source), cutoff_voltage_v=cutoff_v,
                              **{k: v for k, v in options.items() if v})
+    recordings = [load(path) for path in args.data]  # every input is checked before minutes of evaluation
     results = []
-    for path in args.data:
-        res = ev.evaluate_recording(params, load(path), cutoff_v=cutoff_v, capacities_ah=capacities,
+    for rec in recordings:
+        res = ev.evaluate_recording(params, rec, cutoff_v=cutoff_v, capacities_ah=capacities,
                                     checkpoints=checkpoints, end_margin_v=args.end_margin_v, config=config)
         results.append(res)
         if not args.json:
