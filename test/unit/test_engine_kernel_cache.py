@@ -86,3 +86,17 @@ def test_a_kernel_file_another_process_published_first_is_never_rewritten(tmp_pa
     fresh.write_text("new\n")
     _publish(fresh, tmp_path / "engine_kernel_y.py")
     assert (tmp_path / "engine_kernel_y.py").read_text() == "new\n" and not fresh.exists()
+
+
+def test_kernel_files_written_within_the_hour_are_never_pruned(tmp_path):
+    import time
+
+    from battery_predictor.simulation.engine.kernel_module import PRUNE_MIN_AGE_S
+
+    now = time.time()
+    for k in range(MAX_FILES + 3):  # more than the cache keeps, all written recently (e.g. by parallel workers)
+        path = tmp_path / f"engine_kernel_{k:03d}.py"
+        path.write_text("")
+        os.utime(path, (now - 0.5 * PRUNE_MIN_AGE_S - k, now - 0.5 * PRUNE_MIN_AGE_S - k))
+    _prune(tmp_path)
+    assert len(list(tmp_path.glob("engine_kernel_*.py"))) == MAX_FILES + 3  # another process may import any of them

@@ -18,6 +18,7 @@ import math
 import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 from types import ModuleType, SimpleNamespace
 
@@ -197,10 +198,24 @@ def cache_directory() -> Path | None:
     return base if os.access(base, os.W_OK) else None
 
 
+#: Kernel files younger than this (s) are never pruned: another process may be about to import one.
+PRUNE_MIN_AGE_S = 3600.0
+
+
 def _prune(directory: Path, keep: int = MAX_FILES - 1) -> None:
-    """Delete all but the ``keep`` newest kernel files of ``directory`` and their cached code."""
-    files = sorted(directory.glob("engine_kernel_*.py"), key=lambda f: f.stat().st_mtime, reverse=True)
-    for old in files[keep:]:
+    """Delete all but the ``keep`` newest kernel files of ``directory`` and their cached code (files
+    younger than :data:`PRUNE_MIN_AGE_S` stay)."""
+    stamped = []
+    for f in directory.glob("engine_kernel_*.py"):
+        try:
+            stamped.append((f.stat().st_mtime, f))
+        except OSError:  # pruned by another process meanwhile
+            continue
+    stamped.sort(reverse=True)
+    now = time.time()
+    for mtime, old in stamped[keep:]:
+        if now - mtime < PRUNE_MIN_AGE_S:
+            continue
         for cached in [old, *(directory / "__pycache__").glob(f"{old.stem}.*")]:
             try:
                 cached.unlink()
