@@ -122,6 +122,20 @@ class Bench(Node):
                                            "max_ms": 1000.0 * float(values["route_latency_max_s"])}
 
 
+def shut_down(executor, bench, context, procs: list[subprocess.Popen]) -> None:
+    """Stop the benchmark's executor, node and context, then the node processes (SIGINT, killed after 30 s)."""
+    executor.shutdown()
+    bench.destroy_node()
+    context.try_shutdown()
+    for p in procs:
+        p.send_signal(signal.SIGINT)
+    for p in procs:
+        try:
+            p.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            p.kill()
+
+
 def _wait(condition, what: str, procs) -> None:
     deadline = time.monotonic() + TIMEOUT_S
     while not condition():
@@ -222,16 +236,7 @@ def main() -> int:
         with bench._lock:
             updates = list(bench.runtime_updates_s)
     finally:
-        executor.shutdown()
-        bench.destroy_node()
-        context.try_shutdown()
-        for p in procs:
-            p.send_signal(signal.SIGINT)
-        for p in procs:
-            try:
-                p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        shut_down(executor, bench, context, procs)
 
     replay = _replay_updates(args.replay_bag, args.replay_minutes, domain) if args.replay_bag else None
     result = {

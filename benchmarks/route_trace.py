@@ -25,7 +25,6 @@ import argparse
 import json
 import os
 import random
-import signal
 import subprocess
 import sys
 import tempfile
@@ -47,7 +46,7 @@ from battery_predictor.nodes.messages import route_section_msgs  # noqa: E402
 from battery_predictor.profiles.ranger import longest_route  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ros_latency import NODE_PARAMS, TIMEOUT_S, Bench, _wait  # noqa: E402
+from ros_latency import NODE_PARAMS, TIMEOUT_S, Bench, _wait, shut_down  # noqa: E402
 
 BIN = Path(sys.executable).parent
 HELPER = Path(__file__).resolve().parent / "_route_trace_node.py"
@@ -199,16 +198,7 @@ def main() -> int:
                 time.sleep(random.uniform(0.0, args.max_gap))
         load.append(os.getloadavg())
     finally:
-        executor.shutdown()
-        bench.destroy_node()
-        context.try_shutdown()
-        for p in procs:
-            p.send_signal(signal.SIGINT)
-        for p in procs:
-            try:
-                p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        shut_down(executor, bench, context, procs)
 
     result: dict = {"calls": args.calls, "runtime_period_s": args.runtime_period, "load_before_after": load,
                     "variants": dict(variants), "targets": {}}
