@@ -121,6 +121,8 @@ HYSTERESIS_ACTIVATION_RANGE_J_MOL = (0.0, 80000.0)
 #: Search range of the weak series group's capacity fraction (extension ``cell_imbalance``; linear).
 WEAK_GROUP_FRACTION_RANGE = (0.5, 1.0)
 _IMBALANCE_KEYS = {"weak_group_capacity_fraction": "Weak series group capacity fraction"}
+#: Extension -> its always-searched coordinates (name -> extension key in ``cell.extra``).
+_EXTENSION_KEYS = {"hysteresis": _HYSTERESIS_KEYS, "cell_imbalance": _IMBALANCE_KEYS}
 #: Optional hysteresis coordinates -> (extension key, search range, log scale).
 _HYSTERESIS_OPTIONAL = {
     "hysteresis_relaxation_rate_s": ("Positive electrode hysteresis relaxation rate [s-1]", HYSTERESIS_RELAX_RANGE_S, True),
@@ -225,14 +227,12 @@ def shipped_coordinates(params: PackParams) -> dict[str, float]:
         val = pv[key]
         if isinstance(val, (int, float)):
             out[name] = float(val)
-    if "hysteresis" in params.extensions:
+    searched = [keys for ext, keys in _EXTENSION_KEYS.items() if ext in params.extensions]
+    if searched:
         from battery_predictor.simulation.extensions import extension_value
 
-        out.update({name: extension_value(params, key) for name, key in _HYSTERESIS_KEYS.items()})
-    if "cell_imbalance" in params.extensions:
-        from battery_predictor.simulation.extensions import extension_value
-
-        out.update({name: extension_value(params, key) for name, key in _IMBALANCE_KEYS.items()})
+        for keys in searched:
+            out.update({name: extension_value(params, key) for name, key in keys.items()})
     return out
 
 
@@ -456,15 +456,12 @@ def pybamm_values(params: PackParams, coordinates: Mapping[str, float], n_record
         if name in coordinates:
             shared[key] = c[name]
     shared.update(kinetic_values(params, coordinates))
-    for name, key in _HYSTERESIS_KEYS.items():
+    for name, key in {**_HYSTERESIS_KEYS, **_IMBALANCE_KEYS}.items():
         if name in coordinates:
             shared[key] = c[name]
     for name, (key, _, _) in _HYSTERESIS_OPTIONAL.items():
         if name in coordinates:
             shared[key] = float(coordinates[name])
-    for name, key in _IMBALANCE_KEYS.items():
-        if name in coordinates:
-            shared[key] = c[name]
     x_0, y_0 = _first_state(params, basis, c, shipped, "initial_ocv_v:0" in c)
     q_li_ah = x_0 * c["negative_capacity_ah"] + y_0 * c["positive_capacity_ah"]
     out = []
