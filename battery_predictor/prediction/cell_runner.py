@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from battery_predictor.errors import SimulationError
+from battery_predictor.simulation.base import SegmentRun
 from battery_predictor.simulation.cell_setup import build_model, model_options, prepared_parameter_values, quiet_pybamm
 from battery_predictor.simulation.extensions import (
     current_offset_a,
@@ -82,36 +83,6 @@ class RunState:
     charge_ah: float
     weak_solution: object | None = None
 
-
-@dataclass(frozen=True)
-class SegmentRun:
-    """Result of running a sequence of constant-current segments.
-
-    Attributes
-    ----------
-    time_s : numpy.ndarray
-        Sample times in s from the start.
-    pack_voltage_v : numpy.ndarray
-        Pack voltage in V at those times.
-    pack_current_a : numpy.ndarray
-        Pack current in A (positive = discharge).
-    segment_end_index : list of int
-        Index into ``time_s`` of the last sample of each completed segment.
-    reached_cutoff : bool
-        True when a cell reached its lower cut-off before the end.
-    end_time_s : float
-        Time in s at which the run ended.
-    final_state : RunState or None
-        State at the end, to continue from.
-    """
-
-    time_s: np.ndarray
-    pack_voltage_v: np.ndarray
-    pack_current_a: np.ndarray
-    segment_end_index: list[int]
-    reached_cutoff: bool
-    end_time_s: float
-    final_state: RunState | None = None
 
 
 def _build_simulation(params: PackParams) -> pybamm.Simulation:

@@ -14,11 +14,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Protocol
 
-import numpy as np
-
 from battery_predictor.errors import SimulationError
 from battery_predictor.params import PackParams
 from battery_predictor.prediction.cell_runner import PackRunner, RunState
+from battery_predictor.simulation.base import SegmentRun
 from battery_predictor.simulation.engine.segments import EnginePack, EngineState
 from battery_predictor.simulation.extensions import (
     EA_SERIES,
@@ -35,37 +34,6 @@ BACKENDS = ("auto", "engine", "pybamm")
 #: Where a run starts: an SOC, or the state a run of the same model returned.
 RunStart = float | RunState | EngineState
 
-
-class PackRun(Protocol):
-    """A run of a :class:`PackModel` (``SegmentRun`` of PyBaMM stepping, ``EngineSegmentRun`` of the engine)."""
-
-    @property
-    def time_s(self) -> np.ndarray:
-        """Sample times in s from the start."""
-
-    @property
-    def pack_voltage_v(self) -> np.ndarray:
-        """Pack voltage in V at those times."""
-
-    @property
-    def pack_current_a(self) -> np.ndarray:
-        """Pack current in A (positive = discharge)."""
-
-    @property
-    def segment_end_index(self) -> list[int]:
-        """Index into ``time_s`` of the last sample of each completed segment."""
-
-    @property
-    def reached_cutoff(self) -> bool:
-        """True when a cell reached its lower cut-off before the end."""
-
-    @property
-    def end_time_s(self) -> float:
-        """Time in s at which the run ended."""
-
-    @property
-    def final_state(self) -> Any:
-        """The state at the end to continue from: the model's own type (``RunState``, ``EngineState``), or None."""
 
 
 class PackModel(Protocol):
@@ -90,7 +58,7 @@ class PackModel(Protocol):
     def soc_of(self, state: Any) -> float:
         """The SOC of a state a run returned."""
 
-    def run(self, start: Any, segments: Sequence[tuple[float, float]], temperature_k: float) -> PackRun:
+    def run(self, start: Any, segments: Sequence[tuple[float, float]], temperature_k: float) -> SegmentRun:
         """Run ``segments`` ((duration s, pack current A) pairs) from an SOC or a state at ``temperature_k`` (K)."""
 
     def __hash__(self) -> int:

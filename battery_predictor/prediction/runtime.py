@@ -21,7 +21,8 @@ from battery_predictor.errors import SimulationError
 from battery_predictor.prediction.calibration import Calibration, calibrate_soc
 
 if TYPE_CHECKING:
-    from battery_predictor.prediction.pack_model import PackModel, PackRun, RunStart
+    from battery_predictor.prediction.pack_model import PackModel, RunStart
+    from battery_predictor.simulation.base import SegmentRun
 
 #: Longest horizon simulated, s (beyond it the runtime is reported as at least this).
 MAX_HORIZON_S = 72 * 3600.0
@@ -141,7 +142,7 @@ class LoadPath:
 
 def demand_run(runner: PackModel, start: RunStart, current_a: float, power_w: float, exponent: float,
                horizon_s: float, temperature_k: float, first_voltage_v: float,
-               cutoff_voltage_v: float) -> tuple[PackRun, LoadPath]:
+               cutoff_voltage_v: float) -> tuple[SegmentRun, LoadPath]:
     """The pack under a constant demand ``I V^k``: ``(run, LoadPath)``.
 
     The current of each step (:data:`POWER_STEP_S`, longer when the horizon needs more than
@@ -185,7 +186,7 @@ def demand_run(runner: PackModel, start: RunStart, current_a: float, power_w: fl
                           f"in {POWER_PASSES} passes")
 
 
-def run_end_s(run: PackRun, cutoff_voltage_v: float) -> float | None:
+def run_end_s(run: SegmentRun, cutoff_voltage_v: float) -> float | None:
     """Time (s) at which an average-load run reaches the pack cut-off or a cell's, or None within its horizon."""
     t_end = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
     if t_end is None and run.reached_cutoff:
@@ -205,7 +206,7 @@ def load_horizon_s(runner: PackModel, soc: float, average_current_a: float) -> f
 
 
 def peak_crossing_s(runner: PackModel, start: RunStart, average: LoadPath, peak_factor: float,
-                    temperature_k: float, cutoff_voltage_v: float, average_run: PackRun, *, settle_s: float = 5.0,
+                    temperature_k: float, cutoff_voltage_v: float, average_run: SegmentRun, *, settle_s: float = 5.0,
                     tolerance_s: float = 30.0, max_runs: int = 16) -> float | None:
     """First time (s) at which a load peak, drawn from the average-load trajectory, pulls the pack to the cut-off.
 

@@ -51,7 +51,8 @@ from battery_predictor.profiles.temi import INFORMATION, NAVIGATION, TemiUsageCo
 
 if TYPE_CHECKING:
     from battery_predictor.prediction.core import PredictorCore
-    from battery_predictor.prediction.pack_model import PackModel, PackRun, RunStart
+    from battery_predictor.prediction.pack_model import PackModel, RunStart
+    from battery_predictor.simulation.base import SegmentRun
 
 #: Task kinds.
 KINDS = (INFORMATION, NAVIGATION)
@@ -372,7 +373,7 @@ class TaskPlanner:
             duration = max(d / self.loads.speed_m_s, 1.0)
         return [(duration, current)], end
 
-    def _ok(self, run: PackRun) -> tuple[bool, float]:
+    def _ok(self, run: SegmentRun) -> tuple[bool, float]:
         """(no cut-off reached and every voltage >= cut-off, lowest voltage)."""
         if run.reached_cutoff:
             return False, math.nan

@@ -12,8 +12,36 @@ from battery_predictor.simulation.load import StepLoad
 if TYPE_CHECKING:
     from battery_predictor.params import PackParams
 
-#: Why a simulation ended.
-TERMINATIONS = ("cell_cutoff", "end_of_load")
+@dataclass(frozen=True)
+class SegmentRun:
+    """A run of constant-current segments (the predictor's pack models: PyBaMM stepping and the engine).
+
+    Attributes
+    ----------
+    time_s : numpy.ndarray
+        Sample times in s from the start.
+    pack_voltage_v : numpy.ndarray
+        Pack voltage in V at those times.
+    pack_current_a : numpy.ndarray
+        Pack current in A (positive = discharge) of the segment each sample belongs to.
+    segment_end_index : list of int
+        Index into ``time_s`` of the last sample of each completed segment.
+    reached_cutoff : bool
+        True when a cell reached its lower cut-off before the end.
+    end_time_s : float
+        Time in s at which the run ended.
+    final_state : object or None
+        The state at the end (at the cut-off when reached), to continue from: the model's own type
+        (``prediction.cell_runner.RunState``, ``simulation.engine.segments.EngineState``), or None.
+    """
+
+    time_s: np.ndarray
+    pack_voltage_v: np.ndarray
+    pack_current_a: np.ndarray
+    segment_end_index: list[int]
+    reached_cutoff: bool
+    end_time_s: float
+    final_state: Any = None
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from battery_predictor.errors import SimulationError
+from battery_predictor.simulation.base import SegmentRun
 from battery_predictor.simulation.cell_setup import prepared_parameter_values
 from battery_predictor.simulation.engine.modal import modal_system, step_coefficients
 from battery_predictor.simulation.engine.model import diffusivity_m2_s, extract_linear_spm
@@ -83,36 +84,6 @@ class EngineState:
     weak_particles: tuple[np.ndarray, np.ndarray] | None = None
     cell_temperature_k: np.ndarray | None = None
 
-
-@dataclass(frozen=True)
-class EngineSegmentRun:
-    """A run of constant-current segments.
-
-    Attributes
-    ----------
-    time_s : numpy.ndarray
-        Sample times in s from the start.
-    pack_voltage_v : numpy.ndarray
-        Pack voltage in V at those times.
-    pack_current_a : numpy.ndarray
-        Pack current in A (positive = discharge) of the segment each sample belongs to.
-    segment_end_index : list of int
-        Index into ``time_s`` of the last sample of each completed segment.
-    reached_cutoff : bool
-        True when the cell reached its lower cut-off before the end.
-    end_time_s : float
-        When the run ended (s).
-    final_state : EngineState
-        State at the end (at the cut-off when reached).
-    """
-
-    time_s: np.ndarray
-    pack_voltage_v: np.ndarray
-    pack_current_a: np.ndarray
-    segment_end_index: list[int]
-    reached_cutoff: bool
-    end_time_s: float
-    final_state: EngineState
 
 
 @dataclass(frozen=True)
@@ -233,7 +204,7 @@ class EnginePack:
         return state.soc_start - state.charge_ah / self.capacity_ah
 
     # ------------------------------------------------------------------- runs
-    def run(self, start: float | EngineState, segments: npt.ArrayLike, temperature_k: float) -> EngineSegmentRun:
+    def run(self, start: float | EngineState, segments: npt.ArrayLike, temperature_k: float) -> SegmentRun:
         """Run ``segments`` = [(duration_s, pack_current_a), ...] at ``temperature_k`` from an SOC or a state.
 
         A cell below its cut-off as soon as the first segment's current flows gives a run of one NaN
@@ -329,7 +300,7 @@ class EnginePack:
         self.run(0.5 * (low + high), [(60.0, 0.5), (7200.0, 2.0 * self.capacity_ah)], temperature_k)
 
     def _samples(self, runs: CellRuns, duration_s: np.ndarray, pack_a: np.ndarray, cell_a: np.ndarray,
-                 soc_start: float, charge0: float) -> EngineSegmentRun:
+                 soc_start: float, charge0: float) -> SegmentRun:
         first = int(np.argmin(runs.end_time_s))  # the group that reaches its cut-off first ends the pack's run
         end_s = float(runs.end_time_s[first])
         reached = bool(runs.reached_cutoff[first])
@@ -356,7 +327,7 @@ class EnginePack:
                 owner = np.concatenate([owner, np.full(t.size, last)])
         state = self._state_at(runs, duration_s, cell_a, first, end_s, soc_start, charge0)
         if time_s.size == 0:  # at the cut-off as soon as the first segment's current flows
-            return EngineSegmentRun(np.zeros(1), np.full(1, np.nan), np.zeros(1), [], True, 0.0, state)
+            return SegmentRun(np.zeros(1), np.full(1, np.nan), np.zeros(1), [], True, 0.0, state)
         v_cells, cell_temperatures = [], []
         for s in range(runs.end_time_s.size):
             surfaces, cell_temperature_k = self._surfaces(runs, s, duration_s, cell_a, time_s, owner)
@@ -372,7 +343,7 @@ class EnginePack:
             charge_as += (end_s - float(runs.step_start_s[done])) * pack_a[done]
         state = EngineState(particles=state.particles, soc_start=soc_start, charge_ah=charge0 + charge_as / 3600.0,
                             weak_particles=state.weak_particles, cell_temperature_k=state.cell_temperature_k)
-        return EngineSegmentRun(time_s=time_s, pack_voltage_v=v_pack, pack_current_a=pack_i, segment_end_index=ends,
+        return SegmentRun(time_s=time_s, pack_voltage_v=v_pack, pack_current_a=pack_i, segment_end_index=ends,
                                 reached_cutoff=reached, end_time_s=end_s, final_state=state)
 
     def resistance_factor(self, temperature_k: npt.ArrayLike) -> np.ndarray:
