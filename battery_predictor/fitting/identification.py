@@ -238,6 +238,9 @@ class IdentificationProblem:
         Simulations of a recording that ends at its cut-off run this fraction of its duration past
         its end, compared with its minimum voltage (late ends show); others are not padded
         (:func:`padding_s`).
+    group_voltages : bool
+        Fit the weakest measured group voltage too when the params use ``cell_imbalance`` (below);
+        False: the pack voltage only.
 
     With the extension ``cell_imbalance``, a recording that carries its series groups' voltages
     adds a second residual block: its lowest group voltage against the model's lowest cell
@@ -253,13 +256,14 @@ class IdentificationProblem:
     simulator: PackSimulator
     space: list[Coordinate]
     extend_fraction: float = 0.2
+    group_voltages: bool = True
 
     def __post_init__(self) -> None:
         n = len(self.recordings)
         self._basis = electrode_basis(self.params)
         self._grids = [ResidualGrid.for_recording(r, padding_s(r, self.extend_fraction), n) for r in self.recordings]
         self._group_grids: list[tuple[int, ResidualGrid]] = []
-        if "cell_imbalance" in self.params.extensions:
+        if self.group_voltages and "cell_imbalance" in self.params.extensions:
             for k, r in enumerate(self.recordings):
                 grid = ResidualGrid.for_weakest_group(r, padding_s(r, self.extend_fraction), n)
                 if grid is not None:

@@ -121,3 +121,5 @@ def test_group_voltages_change_nothing_without_the_extension_and_none_change_not
     pack_part = without_groups.residuals(at)
     both = with_groups.residuals(at)
     assert both.size > pack_part.size and np.array_equal(both[:pack_part.size], pack_part)
+    ignoring = IdentificationProblem(with_fitted_extension_keys(imbalanced), [rec], sim, space, group_voltages=False)
+    assert not ignoring.fits_weakest_group and np.array_equal(ignoring.residuals(at), pack_part)
