@@ -28,6 +28,10 @@ class Recording:
         Where it came from (file path), used in error messages.
     metadata : dict
         Free-form metadata (pack id, seed, ground truth...).
+    group_voltage_v : numpy.ndarray or None
+        Voltage in V of each series group (or cell) of the pack, shape (n_samples, n_groups), NaN where
+        a group was not measured at a sample (CSV columns ``group<k>_voltage_V``,
+        ``sensor_msgs/BatteryState.cell_voltage`` in a bag); None when not measured.
     """
 
     time_s: np.ndarray
@@ -36,6 +40,7 @@ class Recording:
     temperature_k: np.ndarray | None = None
     source: str = "<memory>"
     metadata: dict[str, Any] = field(default_factory=dict)
+    group_voltage_v: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.time_s)
@@ -44,6 +49,22 @@ class Recording:
                 raise InputDataError(f"{self.source}: column {name} has {len(getattr(self, name))} rows, time_s has {n}")
         if self.temperature_k is not None and len(self.temperature_k) != n:
             raise InputDataError(f"{self.source}: column temperature has {len(self.temperature_k)} rows, time_s has {n}")
+        if self.group_voltage_v is not None:
+            shape = np.shape(self.group_voltage_v)
+            if len(shape) != 2 or shape[0] != n or shape[1] < 1:
+                raise InputDataError(f"{self.source}: group voltages have shape {shape}, expected ({n}, n_groups)")
+
+    @property
+    def min_group_voltage_v(self) -> np.ndarray | None:
+        """The lowest measured group voltage (V) at each sample (NaN where no group was measured); None
+        when the recording has no group voltages."""
+        if self.group_voltage_v is None:
+            return None
+        g = np.asarray(self.group_voltage_v, dtype=float)
+        finite = np.isfinite(g)
+        out = np.min(np.where(finite, g, np.inf), axis=1)
+        out[~finite.any(axis=1)] = np.nan
+        return out
 
     @property
     def duration_s(self) -> float:
@@ -78,6 +99,7 @@ class Recording:
             temperature_k=None if self.temperature_k is None else self.temperature_k[mask],
             source=self.source,
             metadata=dict(self.metadata),
+            group_voltage_v=None if self.group_voltage_v is None else self.group_voltage_v[mask],
         )
 
 

@@ -55,6 +55,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="identify: optional coordinates to search as well (negative_diffusivity_m2_s, "
                         "positive_diffusivity_m2_s, negative_kinetic_scale, positive_kinetic_scale; with the "
                         "hysteresis extension hysteresis_relaxation_rate_s, hysteresis_activation_energy_j_mol)")
+    p.add_argument("--ignore-group-voltages", action="store_true",
+                   help="identify: fit the pack voltage only, also when the data carry series-group voltages "
+                        "(group<k>_voltage_V) and the params use cell_imbalance (default: the weakest group's "
+                        "voltage is fitted too)")
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
                    help="average the data over windows of this many seconds first (as the battery monitor does)")
     p.add_argument("--trials", type=int, default=None, help="tpe: total TPE trials (default 1000)")

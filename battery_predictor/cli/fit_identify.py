@@ -70,7 +70,7 @@ def run_identify(args: argparse.Namespace) -> int:
     recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
     space = _space(params, recs, tuple(args.coordinates))
     problem = IdentificationProblem(params=params, recordings=recs, simulator=simulator_named(args.simulator),
-                                    space=space)
+                                    space=space, group_voltages=not getattr(args, "ignore_group_voltages", False))
     result = identify(problem, evaluations=args.evaluations, seed=args.seed,
                       tpe_fraction=DEFAULT_TPE_FRACTION if args.tpe_fraction is None else args.tpe_fraction,
                       starts=DEFAULT_STARTS if args.starts is None else args.starts,
@@ -80,7 +80,8 @@ def run_identify(args: argparse.Namespace) -> int:
     out = Path(args.out)
     states = {str(r.source): result.coordinates[c.name] for r, c in zip(recs, space[-len(recs):], strict=True)}
     fitted = params.with_values(best.values[0], provenance=_provenance(args, params, recs, best, result, report,
-                                                                       states, thermal), fit=params.fit)
+                                                                       states, thermal, problem.fits_weakest_group),
+                                fit=params.fit)
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")
@@ -89,9 +90,12 @@ def run_identify(args: argparse.Namespace) -> int:
                     "rmse_mv_per_file": best.rmse_mv, "evaluations": result.evaluations,
                     "tpe_evaluations": result.tpe_evaluations, "seconds": result.seconds,
                     "coordinates": result.coordinates, "params": best.values[0],
+                    "fitted_weakest_group_voltage": problem.fits_weakest_group,
                     "identifiability": report.to_dict(), "ocp": ocp_origin(params), "thermal": thermal,
                     "engine_fallback": engine_fallback(best.results), "out": str(out), "plot": str(plot_path)})
         return 0
+    if problem.fits_weakest_group:
+        print("fitting the weakest measured group voltage too (cell_imbalance; --ignore-group-voltages: pack only)")
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
           f"({result.evaluations} evaluations, {result.seconds:.0f} s; {ocp_origin(params)}; {thermal} cell)")
     for c in space:
@@ -119,7 +123,7 @@ def _space(params: PackParams, recs: Sequence[Recording], extra: tuple[str, ...]
 
 def _provenance(args: argparse.Namespace, params: PackParams, recs: Sequence[Recording], best: CandidateScore,
                 result: IdentificationResult, report: IdentifiabilityReport, states: dict[str, float],
-                thermal: str) -> dict[str, Any]:
+                thermal: str, fits_weakest_group: bool = False) -> dict[str, Any]:
     """The fitted params file's ``provenance``: how, when and on what it was identified, the scores and the
     initial OCV (V) each data file started from."""
     return {
@@ -137,6 +141,7 @@ def _provenance(args: argparse.Namespace, params: PackParams, recs: Sequence[Rec
         "evaluations": result.evaluations,
         "seed": args.seed,
         "simulator": args.simulator,
+        "fitted_weakest_group_voltage": fits_weakest_group,
         "thermal": thermal,
         "ocp": ocp_origin(params),
         "identifiability": report.to_dict(),

@@ -124,6 +124,10 @@ class ResidualGrid:
     ends_at_cutoff : bool
         Whether the recording ends at its cut-off (:func:`~battery_predictor.recording.ends_at_cutoff`):
         only then is a prediction below ``U_min`` clipped to it (Eq. 1's stand-in).
+    signal : {"pack", "min_cell"}
+        What is compared: the pack voltage (``PackSimResult.pack_voltage_v``), or the lowest series
+        group's voltage (the recording's :attr:`~battery_predictor.recording.Recording.min_group_voltage_v`
+        against the model's ``min_cell_voltage_v``, see :func:`ResidualGrid.for_weakest_group`).
     """
 
     time_s: np.ndarray
@@ -131,18 +135,43 @@ class ResidualGrid:
     u_min_v: float
     weight: float
     ends_at_cutoff: bool = True
+    signal: str = "pack"
 
     @classmethod
     def for_recording(cls, rec: Recording, extend_s: float, n_recordings: int) -> ResidualGrid:
         """The grid of ``rec`` with ``extend_s`` seconds of padding."""
-        t = rec.relative_time_s
-        u = np.asarray(rec.voltage_v, dtype=float)
+        return cls._padded(rec.relative_time_s, np.asarray(rec.voltage_v, dtype=float), extend_s, n_recordings,
+                           ends_at_cutoff(rec), "pack")
+
+    @classmethod
+    def for_weakest_group(cls, rec: Recording, extend_s: float, n_recordings: int) -> ResidualGrid | None:
+        """The grid of ``rec``'s lowest measured group voltage (V, the samples where any group was measured),
+        padded like :meth:`for_recording`; None when the recording has no group voltages.
+
+        The model's counterpart is the lowest cell voltage of its groups (the weak group's with the
+        extension ``cell_imbalance``), the cell's terminal voltage without the pack's series
+        resistance: a measured group voltage is taken at the group's terminals. On the Nissan Leaf
+        6S2P data the groups add up to the pack voltage plus 0.08-0.11 V, so the pack's connection
+        drop is outside them.
+        """
+        u_all = rec.min_group_voltage_v
+        if u_all is None:
+            return None
+        measured = np.isfinite(u_all)
+        if measured.sum() < 2:
+            return None
+        return cls._padded(rec.relative_time_s[measured], u_all[measured], extend_s, n_recordings,
+                           ends_at_cutoff(rec), "min_cell")
+
+    @classmethod
+    def _padded(cls, t: np.ndarray, u: np.ndarray, extend_s: float, n_recordings: int, at_cutoff: bool,
+                signal: str) -> ResidualGrid:
         u_min = float(u.min())
         dt = float(np.median(np.diff(t)))
         extra = np.arange(t[-1] + dt, t[-1] + extend_s + 0.5 * dt, dt) if extend_s > 0 else np.empty(0)
         ss_tot = float(np.sum((u - u.mean()) ** 2)) or 1.0
         return cls(np.concatenate([t, extra]), np.concatenate([u, np.full(extra.size, u_min)]), u_min,
-                   1.0 / math.sqrt(n_recordings * ss_tot), ends_at_cutoff(rec))
+                   1.0 / math.sqrt(n_recordings * ss_tot), at_cutoff, signal)
 
     def residuals(self, result: PackSimResult | None) -> np.ndarray:
         """Weighted ``measured - predicted``: a continuous stand-in for R2_mod's comparison.
@@ -155,7 +184,8 @@ class ResidualGrid:
         """
         pred = np.full(self.time_s.size, self.u_min_v)
         if result is not None and result.time_s.size >= 2:
-            tp, up = result.time_s, result.pack_voltage_v
+            tp = result.time_s
+            up = result.pack_voltage_v if self.signal == "pack" else result.min_cell_voltage_v
             if result.reached_cutoff and result.end_time_s > tp[-1]:
                 tp, up = np.append(tp, result.end_time_s), np.append(up, min(up[-1], self.u_min_v))
             pred = np.interp(self.time_s, tp, up, right=self.u_min_v)
@@ -208,6 +238,17 @@ class IdentificationProblem:
         Simulations of a recording that ends at its cut-off run this fraction of its duration past
         its end, compared with its minimum voltage (late ends show); others are not padded
         (:func:`padding_s`).
+    group_voltages : bool
+        Fit the weakest measured group voltage too when the params use ``cell_imbalance`` (below);
+        False: the pack voltage only.
+
+    With the extension ``cell_imbalance``, a recording that carries its series groups' voltages
+    adds a second residual block: its lowest group voltage against the model's lowest cell
+    voltage (:meth:`ResidualGrid.for_weakest_group`), weighted like the pack's (each block's sum of
+    squares is about ``1 - R2`` of its signal). From the pack voltage alone the weak group's
+    capacity fraction trades against the electrode capacities; the weakest group's own voltage
+    separates them. The cost is then no longer ``1 - mean R2_mod``; :meth:`score` still reports the
+    pack's R2_mod. Without group voltages or without the extension nothing changes.
     """
 
     params: PackParams
@@ -215,11 +256,23 @@ class IdentificationProblem:
     simulator: PackSimulator
     space: list[Coordinate]
     extend_fraction: float = 0.2
+    group_voltages: bool = True
 
     def __post_init__(self) -> None:
         n = len(self.recordings)
         self._basis = electrode_basis(self.params)
         self._grids = [ResidualGrid.for_recording(r, padding_s(r, self.extend_fraction), n) for r in self.recordings]
+        self._group_grids: list[tuple[int, ResidualGrid]] = []
+        if self.group_voltages and "cell_imbalance" in self.params.extensions:
+            for k, r in enumerate(self.recordings):
+                grid = ResidualGrid.for_weakest_group(r, padding_s(r, self.extend_fraction), n)
+                if grid is not None:
+                    self._group_grids.append((k, grid))
+
+    @property
+    def fits_weakest_group(self) -> bool:
+        """Whether the residuals include the lowest measured group voltage (``cell_imbalance`` and group voltages)."""
+        return bool(self._group_grids)
 
     @property
     def names(self) -> list[str]:
@@ -261,7 +314,8 @@ class IdentificationProblem:
             results, _ = self.simulate(coordinates)
         except SimulationError:
             results = [None] * len(self.recordings)
-        return np.concatenate([g.residuals(r) for g, r in zip(self._grids, results, strict=True)])
+        return np.concatenate([g.residuals(r) for g, r in zip(self._grids, results, strict=True)]
+                              + [g.residuals(results[k]) for k, g in self._group_grids])
 
     def score(self, coordinates: dict[str, float]) -> CandidateScore:
         """R2_mod and RMSE of ``coordinates`` (raises :class:`SimulationError` on failure)."""

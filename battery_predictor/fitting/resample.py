@@ -22,8 +22,9 @@ def resample_windows(rec: Recording, window_s: float) -> Recording:
     The first sample is kept unchanged (it carries the state before the load); the windows
     ``(t0 + k w, t0 + (k + 1) w]`` follow it. Current and temperature are
     averaged weighted by each sample's hold time (so the charge drawn is kept, with the current of
-    a sample held until the next one, as :meth:`StepLoad.from_samples` reads it); voltage is the
-    plain mean of the window's samples. Each window is stamped at its first sample's time, so a
+    a sample held until the next one, as :meth:`StepLoad.from_samples` reads it); voltage and each
+    series group's voltage are the plain mean of the window's samples (a group's over its measured
+    samples: NaN only when the group has none in the window). Each window is stamped at its first sample's time, so a
     window's mean current holds until the next window. Windows without samples are dropped.
 
     Parameters
@@ -60,6 +61,14 @@ def resample_windows(rec: Recording, window_s: float) -> Recording:
     temperature_k = None
     if rec.temperature_k is not None:
         temperature_k = weighted_mean(np.asarray(rec.temperature_k, dtype=float))
+    group_v = None
+    if rec.group_voltage_v is not None:
+        g = np.asarray(rec.group_voltage_v, dtype=float)
+        measured = np.isfinite(g)
+        n_measured = np.add.reduceat(measured.astype(float), starts, axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            group_v = np.add.reduceat(np.where(measured, g, 0.0), starts, axis=0) / n_measured
+        group_v[n_measured == 0] = np.nan
     return Recording(
         time_s=t[starts],
         voltage_v=np.add.reduceat(np.asarray(rec.voltage_v, dtype=float), starts) / counts,
@@ -67,6 +76,7 @@ def resample_windows(rec: Recording, window_s: float) -> Recording:
         temperature_k=temperature_k,
         source=rec.source,
         metadata={**rec.metadata, "resample_window_s": float(window_s)},
+        group_voltage_v=group_v,
     )
 
 

@@ -19,10 +19,15 @@ Required columns:
 Temperature (optional). Unless ``temperature_column=`` names one explicitly, the
 first column of :data:`TEMPERATURE_COLUMNS` that exists is used. Only these
 exact names are recognised (cell/case/surface first, ambient/chamber last);
-other ``*_C`` columns such as ``temperature_pos_C`` (tab sensors) or
-``group1_voltage_V`` are ignored on purpose. Columns ending in ``_C`` are read
-as °C, columns ending in ``_K`` as K. A temperature column that is empty on
-every row gives ``temperature_k=None``.
+other ``*_C`` columns such as ``temperature_pos_C`` (tab sensors) are ignored
+on purpose. Columns ending in ``_C`` are read as °C, columns ending in ``_K`` as
+K. A temperature column that is empty on every row gives ``temperature_k=None``.
+
+Series-group voltages (optional): columns ``group1_voltage_V``, ``group2_voltage_V``, ...
+(:data:`GROUP_VOLTAGE_PATTERN`, in group order) become ``Recording.group_voltage_v``
+(V, one column per group; their names in ``metadata["group_voltage_columns"]``). An empty
+cell is NaN (a group reading never discards a V/I sample); see
+:func:`~battery_predictor.io.validation.check_group_voltages` for the checks.
 
 Checks
 ------
@@ -61,6 +66,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import re
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -70,7 +76,7 @@ import numpy as np
 
 from battery_predictor.conventions import kelvin_to_celsius
 from battery_predictor.errors import InputDataError, in_cli, option_hint
-from battery_predictor.io.validation import check_samples
+from battery_predictor.io.validation import check_group_voltages, check_samples
 from battery_predictor.recording import Recording
 
 #: Columns every measurement CSV must have.
@@ -91,6 +97,9 @@ TEMPERATURE_COLUMNS: tuple[str, ...] = (
     "chamber_temperature_C",
 )
 
+
+#: Series-group voltage columns (V): ``group<k>_voltage_V``, k = 1, 2, ...
+GROUP_VOLTAGE_PATTERN = re.compile(r"^group([0-9]+)_voltage_V$")
 
 DUPLICATE_TIME_POLICIES = ("error", "keep_first", "keep_last")
 
@@ -205,6 +214,12 @@ def _find_columns(table: _Table, temperature_column: str | None) -> tuple[str | 
     return None, ""
 
 
+def _group_columns(table: _Table) -> list[str]:
+    """The table's ``group<k>_voltage_V`` columns in group order."""
+    found = [(int(m.group(1)), name) for name in table.header if (m := GROUP_VOLTAGE_PATTERN.match(name))]
+    return [name for _, name in sorted(found)]
+
+
 def _parse_column(table: _Table, name: str) -> np.ndarray:
     """Column as float array; missing cells -> NaN; non-numeric cells -> InputDataError."""
     cells = table.column(name)
@@ -234,17 +249,20 @@ def _parse_column(table: _Table, name: str) -> np.ndarray:
 
 
 class _Rows(NamedTuple):
-    """One record's rows: 1-based data row numbers, time, voltage, current, temperature column (or None)."""
+    """One record's rows: 1-based data row numbers, time, voltage, current, temperature column (or None),
+    group voltages (n_rows, n_groups) (or None)."""
 
     rows: np.ndarray
     t: np.ndarray
     v: np.ndarray
     i: np.ndarray
     temp: np.ndarray | None
+    groups: np.ndarray | None = None
 
     def take(self, keep: np.ndarray) -> _Rows:
         return _Rows(self.rows[keep], self.t[keep], self.v[keep], self.i[keep],
-                     self.temp[keep] if self.temp is not None else None)
+                     self.temp[keep] if self.temp is not None else None,
+                     self.groups[keep] if self.groups is not None else None)
 
 
 def _build(
@@ -261,8 +279,10 @@ def _build(
     metadata: dict[str, Any],
 ) -> Recording:
     """Validate one record (the table rows ``row_idx``, 0-based) and make a Recording."""
+    group_names = _group_columns(table)
+    groups = np.column_stack([columns[g][row_idx] for g in group_names]) if group_names else None
     data = _Rows(row_idx + 1, columns["time_s"][row_idx], columns["voltage_V"][row_idx],
-                 columns["current_A"][row_idx], columns[temp_name][row_idx] if temp_name else None)
+                 columns["current_A"][row_idx], columns[temp_name][row_idx] if temp_name else None, groups)
     meta = dict(metadata)
     data = _drop_bad_rows(table, row_idx, data, source=source, drop_nan=drop_nan, meta=meta)
     data = _drop_repeated_times(table, data, source=source, duplicate_times=duplicate_times, meta=meta)
@@ -277,6 +297,12 @@ def _build(
     if filled:
         meta["filled_temperature_rows"] = filled
     meta["temperature_column"] = temp_name if temperature_k is not None else None
+    group_v = None
+    if data.groups is not None:
+        group_v = check_group_voltages(data.groups, source=source, columns=group_names, drop_nan=drop_nan,
+                                       where=lambda k: _where(table, k, data.rows))
+        if group_v is not None:
+            meta["group_voltage_columns"] = group_names
     return Recording(
         time_s=np.ascontiguousarray(data.t),
         voltage_v=np.ascontiguousarray(data.v),
@@ -284,6 +310,7 @@ def _build(
         temperature_k=None if temperature_k is None else np.ascontiguousarray(temperature_k),
         source=source,
         metadata=meta,
+        group_voltage_v=None if group_v is None else np.ascontiguousarray(group_v),
     )
 
 
@@ -406,7 +433,7 @@ def load_csv(
     p = Path(path)
     table = _read_table(p)
     temp_name, temp_unit = _find_columns(table, temperature_column)
-    names = [*REQUIRED_COLUMNS, *([temp_name] if temp_name else [])]
+    names = [*REQUIRED_COLUMNS, *([temp_name] if temp_name else []), *_group_columns(table)]
     columns = {name: _parse_column(table, name) for name in names}
     return _build(
         table,
@@ -456,7 +483,7 @@ def load_csv_groups(
             f"{', '.join(repr(c) for c in missing)}; found: {', '.join(table.header)}"
         )
     temp_name, temp_unit = _find_columns(table, temperature_column)
-    names = [*REQUIRED_COLUMNS, *([temp_name] if temp_name else [])]
+    names = [*REQUIRED_COLUMNS, *([temp_name] if temp_name else []), *_group_columns(table)]
     columns = {name: _parse_column(table, name) for name in names}
     keys_per_column = [[cell.strip() for cell in table.column(c)] for c in by]
     groups: dict[tuple[str, ...], list[int]] = {}
@@ -488,12 +515,12 @@ def _default_file_mode() -> int:
 
 
 def save_csv(recording: Recording, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
-    """Write ``time_s,voltage_V,current_A[,temperature_C]`` (current positive = discharge).
+    """Write ``time_s,voltage_V,current_A[,temperature_C][,group1_voltage_V,...]`` (current positive = discharge).
 
     Floats are written with the shortest representation that reads back to
     the same value, so :func:`load_csv` returns identical time, voltage and
     current arrays (temperature goes through °C and back, equal to ~1e-13 K).
-    NaN temperatures are written as empty cells. ``recording.metadata`` is not
+    NaN temperatures and group voltages are written as empty cells. ``recording.metadata`` is not
     stored (CSV has no place for it; use a bag to keep it). The file is written
     to a temporary file first and renamed, so a failed write leaves no partial
     CSV behind.
@@ -510,6 +537,10 @@ def save_csv(recording: Recording, path: str | os.PathLike[str], *, overwrite: b
     if recording.temperature_k is not None:
         header.append("temperature_C")
         cols.append(np.asarray(kelvin_to_celsius(np.asarray(recording.temperature_k, float))))
+    if recording.group_voltage_v is not None:
+        groups = np.asarray(recording.group_voltage_v, float)
+        header.extend(f"group{k + 1}_voltage_V" for k in range(groups.shape[1]))
+        cols.extend(groups.T)
 
     def fmt(x: float) -> str:
         return repr(x) if math.isfinite(x) else ""

@@ -108,7 +108,7 @@ def bag_to_csv(
     drop_nan: bool = False,
     overwrite: bool = False,
 ) -> Path:
-    """Convert a bag (either topic style) to ``time_s,voltage_V,current_A[,temperature_C]``.
+    """Convert a bag (either topic style) to ``time_s,voltage_V,current_A[,temperature_C][,group<k>_voltage_V]``.
 
     The bag's metadata is not kept (CSV has no place for it). ``time_s`` is
     the bag's time axis (see :mod:`battery_predictor.io.bags`).

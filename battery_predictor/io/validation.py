@@ -8,7 +8,7 @@ problem raises :class:`~battery_predictor.errors.InputDataError` with a one-line
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -19,6 +19,8 @@ from battery_predictor.errors import InputDataError, option_hint
 MAX_PLAUSIBLE_VOLTAGE_V = 100.0
 #: A larger median of the non-zero |current| means milliamperes.
 MAX_PLAUSIBLE_CURRENT_A = 1000.0
+#: A larger median group (cell) voltage means millivolts (no lithium-ion cell reaches it).
+MAX_PLAUSIBLE_GROUP_VOLTAGE_V = 10.0
 #: Plausible range of a measured cell/ambient temperature in °C.
 PLAUSIBLE_TEMPERATURE_RANGE_C = (-60.0, 150.0)
 
@@ -135,6 +137,49 @@ def check_temperature_k(temperature_k: np.ndarray, *, source: str, column: str) 
         raise InputDataError(
             f"{source}: column {column!r} has median {med_c:.4g} °C, outside the plausible {lo:g}..{hi:g} °C{hint}"
         )
+
+
+def check_group_voltages(group_v: np.ndarray, *, source: str, columns: Sequence[str], drop_nan: bool,
+                         where: Callable[[int], str]) -> np.ndarray | None:
+    """The measured series-group voltages (V), checked; None when no group has a finite value.
+
+    A missing or non-finite reading stays NaN (a group sensor that drops out never discards the
+    pack's voltage/current sample). A reading <= 0 V is an error (``drop_nan``: made NaN); a median
+    above :data:`MAX_PLAUSIBLE_GROUP_VOLTAGE_V` means millivolts.
+
+    Parameters
+    ----------
+    group_v : numpy.ndarray
+        Shape (n_samples, n_groups), NaN where missing.
+    source : str
+        The start of every message.
+    columns : sequence of str
+        The groups' names in messages (CSV columns, or e.g. ``cell_voltage[0]``).
+    drop_nan : bool
+        Make non-positive readings NaN instead of raising.
+    where : callable
+        ``where(k)``: the position of sample ``k`` in messages (a CSV line, a bag sample).
+    """
+    g = np.array(group_v, dtype=float, ndmin=2)
+    g[~np.isfinite(g)] = np.nan
+    if not np.isfinite(g).any():
+        return None
+    nonpositive = g <= 0.0
+    if nonpositive.any():
+        if not drop_nan:
+            k, j = (int(x) for x in np.argwhere(nonpositive)[0])
+            raise InputDataError(
+                f"{source}: {where(k)}: {columns[j]} {g[k, j]!r} is not positive ({int(nonpositive.sum())} such "
+                "reading(s))" + option_hint("drop_nan", True, "to ignore them")
+            )
+        g[nonpositive] = np.nan
+    finite = g[np.isfinite(g)]
+    med = float(np.median(finite)) if finite.size else 0.0
+    if med > MAX_PLAUSIBLE_GROUP_VOLTAGE_V:
+        raise InputDataError(
+            f"{source}: group voltages ({columns[0]}...) have median {med:.6g}, which looks like millivolts; convert to volts"
+        )
+    return g if np.isfinite(g).any() else None
 
 
 def nearest_index(t_src: np.ndarray, t_query: np.ndarray) -> np.ndarray:

@@ -37,11 +37,17 @@ A sample is rejected, and counted under one reason of :data:`REASONS`, when
 A NaN temperature in a ``BatteryState`` means "not measured" (as the message
 definition says) and is not a rejection; an out-of-range temperature drops
 the temperature only (counted as ``out_of_range`` on the ``temperature`` input).
+The same holds for the cell (series-group) voltages of ``BatteryState.cell_voltage``:
+NaN entries are not measured; an entry that is infinite, <= 0 V or above
+:data:`MAX_CELL_VOLTAGE_V` drops the sample's cell voltages only (counted on the
+``cell_voltage`` input as ``nan`` / ``out_of_range``).
 
 Windows
 -------
 Accepted samples are averaged over windows ``[k w, (k + 1) w)`` of
-``window_s = w`` seconds on the time base above. A window is closed when a
+``window_s = w`` seconds on the time base above; the lowest measured cell voltage
+of the window's accepted samples is kept (``PackSnapshot.min_cell_voltage_v``, the
+route safety check of :mod:`battery_predictor.prediction.core`). A window is closed when a
 sample of a later window arrives, or by :meth:`BatteryMonitor.tick` once
 ``now_s`` is ``late_allowance_s`` past its end. A closed window with at least
 one voltage and one current sample becomes a :class:`PackSnapshot` stamped
@@ -65,6 +71,9 @@ REASONS = ("nan", "out_of_range", "out_of_order", "duplicate", "late", "future")
 INVALID_REASONS = ("nan", "out_of_range")
 #: Input styles of :class:`MonitorConfig`.
 STYLES = ("battery_state", "relay")
+
+#: A cell (series-group) voltage above this (V) is no lithium-ion cell's: a millivolt reading or a broken sensor.
+MAX_CELL_VOLTAGE_V = 10.0
 
 #: Diagnostic levels (the values of diagnostic_msgs/DiagnosticStatus).
 OK, WARN, ERROR = 0, 1, 2
@@ -153,6 +162,9 @@ class PackSnapshot:
         True when no fresh input arrived within ``stale_after_s`` (values are the last known ones).
     peak_current_a : float
         Largest sample current of the window in A (positive = discharge); NaN for a stale snapshot.
+    min_cell_voltage_v : float
+        Lowest cell (series-group) voltage measured in the window in V (``BatteryState.cell_voltage``);
+        NaN when none was measured, and for a stale snapshot.
     """
 
     stamp_s: float
@@ -164,6 +176,7 @@ class PackSnapshot:
     samples_rejected: int
     stale: bool
     peak_current_a: float = math.nan
+    min_cell_voltage_v: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -235,6 +248,7 @@ class _Window:
     used: int = 0
     rejected: int = 0
     peak_current: float = -math.inf
+    min_cell_voltage: float = math.inf
 
 
 class BatteryMonitor:
@@ -278,8 +292,11 @@ class BatteryMonitor:
 
     # ---------------------------------------------------------------- inputs
     def add_sample(self, stamp_s: float, voltage_v: float, current_a: float, temperature_k: float,
-                   now_s: float) -> SampleVerdict:
-        """One ``BatteryState`` sample (V, A positive = discharge, K or NaN = not measured) stamped ``stamp_s``."""
+                   now_s: float, cell_voltages_v: Sequence[float] = ()) -> SampleVerdict:
+        """One ``BatteryState`` sample (V, A positive = discharge, K or NaN = not measured) stamped ``stamp_s``.
+
+        ``cell_voltages_v`` are the message's ``cell_voltage`` (V, NaN = not measured; empty: none).
+        """
         cfg = self.config
         values = {"voltage": voltage_v, "current": current_a}
         if not all(_finite(v) for v in values.values()):
@@ -294,7 +311,23 @@ class BatteryMonitor:
                 self._count_rejection("temperature", "out_of_range", now_s)
         elif not (isinstance(temperature_k, float) and math.isnan(temperature_k)):
             self._count_rejection("temperature", "nan", now_s)  # +-inf: broken sensor, not "not measured"
+        cells = self._min_cell_voltage(cell_voltages_v, now_s)
+        if cells is not None:
+            values["min_cell_voltage"] = cells
         return self._accept("battery_state", stamp_s, values, now_s)
+
+    def _min_cell_voltage(self, cell_voltages_v: Sequence[float], now_s: float) -> float | None:
+        """The lowest measured cell voltage (V) of one message; None when none is measured or any is invalid."""
+        measured = [v for v in (float(x) for x in cell_voltages_v) if not math.isnan(v)]
+        if not measured:
+            return None
+        if not all(math.isfinite(v) for v in measured):
+            self._count_rejection("cell_voltage", "nan", now_s)
+            return None
+        if not all(0.0 < v <= MAX_CELL_VOLTAGE_V for v in measured):
+            self._count_rejection("cell_voltage", "out_of_range", now_s)
+            return None
+        return min(measured)
 
     def add_voltage(self, stamp_s: float, voltage_v: float, now_s: float) -> SampleVerdict:
         """One relay voltage sample in V."""
@@ -358,6 +391,9 @@ class BatteryMonitor:
             self._window = _Window(index)
         w = self._window
         for key, value in values.items():
+            if key == "min_cell_voltage":
+                w.min_cell_voltage = min(w.min_cell_voltage, value)
+                continue
             w.sums[key] += value
             w.counts[key] += 1
         if "current" in values:
@@ -391,7 +427,8 @@ class BatteryMonitor:
             t_k = self._last_values[2] if self._last_values is not None else math.nan
         self._last_values = (v, i, t_k)
         snap = PackSnapshot((w.index + 1) * self.config.window_s, v, i, t_k, self.config.window_s, w.used,
-                            w.rejected, False, w.peak_current)
+                            w.rejected, False, w.peak_current,
+                            w.min_cell_voltage if math.isfinite(w.min_cell_voltage) else math.nan)
         self._last_snapshot = snap
         self._last_stale_emit = None
         self.snapshots_emitted += 1
@@ -456,7 +493,8 @@ def _finite(value: object) -> bool:
 
 def monitor_windows(time_s: Sequence[float] | np.ndarray, voltage_v: Sequence[float] | np.ndarray,
                     current_a: Sequence[float] | np.ndarray, temperature_k: Sequence[float] | np.ndarray | None = None,
-                    config: MonitorConfig | None = None) -> list[PackSnapshot]:
+                    config: MonitorConfig | None = None,
+                    cell_voltage_v: Sequence[Sequence[float]] | np.ndarray | None = None) -> list[PackSnapshot]:
     """The clean pack states a monitor publishes for a recorded series (offline, in time order).
 
     Each sample is handed to :meth:`BatteryMonitor.add_sample` at its own time, so the windows,
@@ -470,12 +508,17 @@ def monitor_windows(time_s: Sequence[float] | np.ndarray, voltage_v: Sequence[fl
         Temperature in K per sample (None = not measured).
     config : MonitorConfig, optional
         Monitor settings (default: wide physical ranges, 5 s windows).
+    cell_voltage_v : array_like, optional
+        Cell (series-group) voltages in V per sample, shape (n_samples, n_cells), NaN = not measured
+        (``Recording.group_voltage_v``).
     """
     monitor = BatteryMonitor(config or MonitorConfig())
     temps = [math.nan] * len(time_s) if temperature_k is None else temperature_k
+    cells: Sequence[Sequence[float]] | np.ndarray = [()] * len(time_s) if cell_voltage_v is None else cell_voltage_v
     out: list[PackSnapshot] = []
-    for t, v, i, t_k in zip(time_s, voltage_v, current_a, temps):
-        out += monitor.add_sample(float(t), float(v), float(i), float(t_k), float(t)).snapshots
+    for t, v, i, t_k, c in zip(time_s, voltage_v, current_a, temps, cells):
+        out += monitor.add_sample(float(t), float(v), float(i), float(t_k), float(t),
+                                  [float(x) for x in c]).snapshots
     if len(time_s):
         out += monitor.tick(float(time_s[-1]) + monitor.config.window_s + monitor.config.late_allowance_s + 1e-6)
     return [s for s in out if not s.stale]

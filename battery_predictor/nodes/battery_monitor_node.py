@@ -6,8 +6,10 @@ Inputs (parameter ``input_style``), subscribed with the sensor-data QoS passed i
 * ``battery_state``: ``sensor_msgs/BatteryState`` on ``battery_state_topic``
   (Ranger SDK bridge). ``current`` is negative while discharging in that
   message; it is converted by :func:`battery_predictor.conventions.battery_state_current_to_internal`.
-  ``temperature`` is in °C, NaN = not measured. Timed by ``header.stamp``
-  (the node clock when the stamp is zero).
+  ``temperature`` is in °C, NaN = not measured. ``cell_voltage`` (V, NaN = not
+  measured): the window's lowest goes on in ``PackState.min_cell_voltage_v`` (the
+  predictor refuses routes when it is at or below the cell's lower cut-off).
+  Timed by ``header.stamp`` (the node clock when the stamp is zero).
 * ``relay``: ``std_msgs/Float64`` ``<relay_prefix>/voltage`` (V) and
   ``<relay_prefix>/current`` (A, positive = discharge) and
   ``sensor_msgs/Temperature`` ``<relay_prefix>/temperature`` (°C) from the ESP32 +
@@ -196,7 +198,8 @@ class BatteryMonitorNode(Node):
         temp_c = float(msg.temperature)
         temp_k = float(celsius_to_kelvin(temp_c)) if not math.isnan(temp_c) else math.nan
         verdict = self.monitor.add_sample(stamp, float(msg.voltage),
-                                          float(battery_state_current_to_internal(float(msg.current))), temp_k, now)
+                                          float(battery_state_current_to_internal(float(msg.current))), temp_k, now,
+                                          [float(v) for v in msg.cell_voltage])
         self._publish(verdict.snapshots)
         self._count("battery_state")
 

@@ -57,6 +57,11 @@ def ns_to_stamp(time_ns: int) -> Time:
     return Time(sec=int(time_ns) // 1_000_000_000, nanosec=int(time_ns) % 1_000_000_000)
 
 
+#: Whether the built ``PackState`` has ``min_cell_voltage_v`` (an interface package built before the field
+#: was added has not: ``make setup`` rebuilds it; until then no cell voltage is passed on).
+PACK_STATE_HAS_MIN_CELL = hasattr(PackState(), "min_cell_voltage_v")
+
+
 def pack_state_msg(snap: PackSnapshot, frame_id: str) -> PackState:
     """A monitor snapshot as ``PackState``."""
     msg = PackState(voltage_v=float(snap.voltage_v), current_a=float(snap.current_a),
@@ -64,9 +69,18 @@ def pack_state_msg(snap: PackSnapshot, frame_id: str) -> PackState:
                     temperature_k=float(snap.temperature_k), window_s=float(snap.window_s),
                     samples_used=int(min(snap.samples_used, 2**32 - 1)),
                     samples_rejected=int(min(snap.samples_rejected, 2**32 - 1)), stale=bool(snap.stale))
+    if PACK_STATE_HAS_MIN_CELL:
+        msg.min_cell_voltage_v = float(snap.min_cell_voltage_v)
     msg.header.stamp = s_to_stamp(snap.stamp_s)
     msg.header.frame_id = frame_id
     return msg
+
+
+def pack_state_min_cell_voltage_v(msg: PackState) -> float:
+    """``PackState.min_cell_voltage_v`` in V; NaN when not measured (NaN, <= 0: the default of a message that
+    does not set it, or a ``PackState`` built without the field)."""
+    value = float(getattr(msg, "min_cell_voltage_v", math.nan))
+    return value if math.isfinite(value) and value > 0.0 else math.nan
 
 
 def remaining_runtime_msg(status: RuntimeStatus, frame_id: str) -> RemainingRuntime:

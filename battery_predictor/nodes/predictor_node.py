@@ -54,6 +54,7 @@ from battery_predictor.nodes.messages import (
     fill_feasible_tasks_response,
     fill_plan_route_response,
     fill_route_response,
+    pack_state_min_cell_voltage_v,
     plan_request,
     remaining_runtime_msg,
     route_sections,
@@ -357,7 +358,7 @@ class PredictorNode(Node):
                 self._monitor_stale = False
             for core in {id(self.core): self.core, id(self.route_core): self.route_core}.values():
                 core.update_state(stamp, float(msg.voltage_v), float(msg.current_a), float(msg.temperature_k),
-                                  float(msg.peak_current_a))
+                                  float(msg.peak_current_a), pack_state_min_cell_voltage_v(msg))
                 core.precalibrate()  # here, so a route answer finds the state calibrated
         with self._lock:
             self.states_received += 1

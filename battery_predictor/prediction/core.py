@@ -206,6 +206,9 @@ class PredictorCore:
         self.config = config
         self._lock = threading.Lock()
         self._state: tuple[float, float, float, float] | None = None
+        #: Lowest cell (series-group) voltage measured in the latest state's window (V; NaN: not measured).
+        self._min_cell_voltage_v = math.nan
+        self._cell_cutoff_v: float | None = None
         self._history: deque[tuple[float, float, float, float]] = deque()
         self._cal_lock = threading.Lock()
         self._cal: tuple[float, float, Calibration] | None = None  # (stamp, full-calibration stamp, cal)
@@ -266,10 +269,12 @@ class PredictorCore:
 
     # ----------------------------------------------------------------- input
     def update_state(self, stamp_s: float, voltage_v: float, current_a: float, temperature_k: float,
-                     peak_current_a: float = math.nan) -> None:
+                     peak_current_a: float = math.nan, min_cell_voltage_v: float = math.nan) -> None:
         """Take a clean pack state (V, A positive = discharge, K or NaN) stamped ``stamp_s``.
 
-        ``peak_current_a`` is the window's largest sample current (A; NaN when unknown).
+        ``peak_current_a`` is the window's largest sample current (A; NaN when unknown);
+        ``min_cell_voltage_v`` its lowest measured cell (series-group) voltage (V; NaN when not
+        measured), which only the route check reads (:meth:`can_accept_route`).
         """
         if not (math.isfinite(stamp_s) and math.isfinite(voltage_v) and math.isfinite(current_a)):
             return
@@ -278,6 +283,7 @@ class PredictorCore:
             if previous is not None and stamp_s <= previous[0]:
                 return
             self._state = (stamp_s, voltage_v, current_a, temperature_k)
+            self._min_cell_voltage_v = float(min_cell_voltage_v)
             was_charging = self._load.in_session
             if self._load.add(stamp_s, current_a, peak_current_a, voltage_v):
                 self._new_state(stamp_s, "a charging session began")
@@ -307,6 +313,24 @@ class PredictorCore:
         """(stamp_s, voltage_v, current_a, temperature_k) of the latest state, or None."""
         with self._lock:
             return self._state
+
+    def _measured_cell_below_cutoff(self) -> str:
+        """Why the latest state's lowest measured cell voltage forbids a route ("" when it does not, or none was
+        measured): it is at or below the cell's lower cut-off voltage of the params."""
+        with self._lock:
+            v_cell = self._min_cell_voltage_v
+        if not math.isfinite(v_cell) or self.params is None:
+            return ""
+        if self._cell_cutoff_v is None:
+            try:
+                self._cell_cutoff_v = self.params.cell_lower_cutoff_v
+            except (BatteryPredictorError, KeyError, ValueError):
+                self._cell_cutoff_v = math.nan
+        cutoff = self._cell_cutoff_v
+        if math.isfinite(cutoff) and v_cell <= cutoff:
+            return (f"measured minimum cell voltage {v_cell:.3f} V is already at or below the cell's lower cut-off "
+                    f"{cutoff:.2f} V (params)")
+        return ""
 
     def _runner(self) -> PackModel:
         """The pack model (raises when no params file could be loaded; answers check ``_usable_state`` first)."""
@@ -522,7 +546,8 @@ class PredictorCore:
         """Decide a route (sections: :class:`~battery_predictor.profiles.ranger.RouteSection`).
 
         Accepted only when the latest measurement, moved to the standstill current, is above the
-        threshold, the freshly calibrated state reproduces the measurement within
+        threshold, its lowest measured cell voltage (when the monitor had one) is above the cell's
+        lower cut-off voltage, the freshly calibrated state reproduces the measurement within
         ``state_tolerance_v`` and the simulated route ends above the threshold. A runtime update
         running meanwhile pauses between its model runs until the answer is out (:mod:`.priority`).
         """
@@ -537,6 +562,9 @@ class PredictorCore:
         status, reason, state = self._usable_state(now_s)
         if status != STATUS_OK or state is None:
             return rejected(f"state unknown: {reason}", threshold)
+        cell_reason = self._measured_cell_below_cutoff()
+        if cell_reason:
+            return rejected(cell_reason, threshold)
         _, v, i, t_k = state
         temp = self._temperature(t_k)
         r_ohm = self._resistance(temp)

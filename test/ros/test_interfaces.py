@@ -39,6 +39,7 @@ def test_pack_state_fields() -> None:
         "samples_used": "uint32",
         "samples_rejected": "uint32",
         "stale": "boolean",
+        "min_cell_voltage_v": "double",
     }
     msg = PackState(temperature_k=math.nan, current_a=2.5, stale=True)
     assert math.isnan(msg.temperature_k)

@@ -14,7 +14,9 @@ Two topic styles
     (positive = discharge) only by
     :func:`battery_predictor.conventions.battery_state_current_to_internal` /
     :func:`~battery_predictor.conventions.internal_current_to_battery_state`.
-    ``temperature`` is in °C, NaN when not measured. The sample time is
+    ``temperature`` is in °C, NaN when not measured. ``cell_voltage`` carries the
+    recording's series-group voltages (``Recording.group_voltage_v``, V, NaN where a group
+    was not measured; empty when there are none). The sample time is
     ``header.stamp`` (the bag receive time when the stamp is zero). Fields the
     recording does not have (charge, capacity, percentage...) are written as
     NaN; ``power_supply_status`` is DISCHARGING/CHARGING/NOT_CHARGING from the

@@ -22,7 +22,7 @@ from battery_predictor.io.bags.storage import (
     resolve,
 )
 from battery_predictor.io.bags.topics import select_topic
-from battery_predictor.io.validation import check_samples, nearest_index
+from battery_predictor.io.validation import check_group_voltages, check_samples, nearest_index
 from battery_predictor.recording import Recording
 
 _RELAY_MIN_PAIR_TOLERANCE_S = 0.5
@@ -108,8 +108,9 @@ def recording_from_messages(source: str, style: str, name: str, got: Mapping[str
     to its ``(log_time_ns, message)`` pairs; ``time_origin`` is :func:`time_origin` of the bag; ``metadata``
     its decoded custom data.
     """
+    group_v: np.ndarray | None = None
     if style == "battery_state":
-        ns, v, i, temp_c, extra = _battery_states(source, name, got.get(name, []))
+        ns, v, i, temp_c, group_v, extra = _battery_states(source, name, got.get(name, []))
         where = name
     else:
         ns, v, i, temp_c, extra = _merge_relay(source, name, got)
@@ -128,6 +129,7 @@ def recording_from_messages(source: str, style: str, name: str, got: Mapping[str
             )
         extra_meta["dropped_nan_samples"] = int(bad.sum())
         ns, v, i, temp_c = ns[~bad], v[~bad], i[~bad], temp_c[~bad]
+        group_v = None if group_v is None else group_v[~bad]
         if not len(ns):
             raise InputDataError(f"{source}: {where}: no samples with a valid voltage and current")
 
@@ -142,21 +144,44 @@ def recording_from_messages(source: str, style: str, name: str, got: Mapping[str
         drop_nan=drop_nan, gap_message=gap_message, expect_discharge=expect_discharge)
     if filled:
         extra_meta["filled_temperature_samples"] = filled
+    if group_v is not None:
+        group_v = check_group_voltages(group_v, source=f"{source}: {where}", drop_nan=drop_nan,
+                                       columns=[f"cell_voltage[{j}]" for j in range(group_v.shape[1])],
+                                       where=lambda k: f"sample {k} (stamp {int(ns[k])} ns)")
     meta.update(extra_meta)
-    return Recording(time_s=time_s, voltage_v=v, current_a=i, temperature_k=temperature_k, source=source, metadata=meta)
+    return Recording(time_s=time_s, voltage_v=v, current_a=i, temperature_k=temperature_k, source=source, metadata=meta,
+                     group_voltage_v=group_v)
+
+
+def _cell_voltages(msgs: list[tuple[int, Any]]) -> np.ndarray | None:
+    """The messages' ``cell_voltage`` (V) as (n_messages, n_cells), NaN-padded where a message has fewer
+    cells than the longest; None when every message's is empty."""
+    cells = [np.asarray(m.cell_voltage, dtype=float).ravel() for _, m in msgs]
+    width = max((c.size for c in cells), default=0)
+    if width == 0:
+        return None
+    out = np.full((len(cells), width), np.nan)
+    for k, c in enumerate(cells):
+        out[k, :c.size] = c
+    return out
 
 
 def _battery_states(source: str, name: str, msgs: list[tuple[int, Any]]
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
-    """The BatteryState messages' (stamps ns, V, A, degC, notes), sorted, the last of each repeated stamp kept."""
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, dict[str, int]]:
+    """The BatteryState messages' (stamps ns, V, A, degC, cell voltages V or None, notes), sorted, the last of
+    each repeated stamp kept."""
     if not msgs:
         raise BagError(f"{source}: topic {name} has no messages")
     ns = np.array([_stamp_ns(log, m.header) for log, m in msgs], dtype=np.int64)
     v = np.array([m.voltage for _, m in msgs], dtype=float)
     i = np.asarray(battery_state_current_to_internal(np.array([m.current for _, m in msgs], dtype=float)))
     temp_c = np.array([m.temperature for _, m in msgs], dtype=float)
-    ns, (v, i, temp_c), dup = _sorted_unique(ns, v, i, temp_c)
-    return ns, v, i, temp_c, {"dropped_duplicate_stamps": dup}
+    cells = _cell_voltages(msgs)
+    if cells is None:
+        ns, (v, i, temp_c), dup = _sorted_unique(ns, v, i, temp_c)
+    else:
+        ns, (v, i, temp_c, cells), dup = _sorted_unique(ns, v, i, temp_c, cells)
+    return ns, v, i, temp_c, cells, {"dropped_duplicate_stamps": dup}
 
 
 def _times(ns: np.ndarray, origin: tuple[int, float] | None) -> np.ndarray:

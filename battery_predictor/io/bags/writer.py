@@ -107,7 +107,8 @@ def write_recording_bag(
     custom[KEY_ORIGIN_NS] = str(origin_ns)
     custom[KEY_BASE_S] = repr(t_base)
     _make_room(p, overwrite)
-    _write(p, custom, style, prefix, stamps, v, i, temp_k, meta)
+    group_v = None if recording.group_voltage_v is None else np.asarray(recording.group_voltage_v, dtype=float)
+    _write(p, custom, style, prefix, stamps, v, i, temp_k, meta, group_v)
     return p
 
 
@@ -178,7 +179,7 @@ def _make_room(p: Path, overwrite: bool) -> None:
 
 
 def _write(p: Path, custom: dict[str, str], style: str, prefix: str, stamps: np.ndarray, v: np.ndarray,
-           i: np.ndarray, temp_k: np.ndarray | None, meta: dict[str, Any]) -> None:
+           i: np.ndarray, temp_k: np.ndarray | None, meta: dict[str, Any], group_v: np.ndarray | None = None) -> None:
     """Write the messages and their SHA-256 digests; never leave a half-written bag behind."""
     from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
@@ -193,7 +194,7 @@ def _write(p: Path, custom: dict[str, str], style: str, prefix: str, stamps: np.
     digests = _DigestingWriter(writer)
     try:
         if style == "battery_state":
-            _write_battery_state(digests, ts, prefix, stamps, v, i, temp_k, meta)
+            _write_battery_state(digests, ts, prefix, stamps, v, i, temp_k, meta, group_v)
         else:
             _write_relay(digests, ts, prefix, stamps, v, i, temp_k)
         writer.set_custom_data(KEY_SHA256, json.dumps(digests.hexdigests(), sort_keys=True))
@@ -239,7 +240,9 @@ def _stamp(ts: Typestore, ns: int) -> Any:
 
 
 def _write_battery_state(writer: _DigestingWriter, ts: Typestore, topic: str, stamps: np.ndarray, v: np.ndarray,
-                         i: np.ndarray, temp_k: np.ndarray | None, meta: dict[str, Any]) -> None:
+                         i: np.ndarray, temp_k: np.ndarray | None, meta: dict[str, Any],
+                         group_v: np.ndarray | None = None) -> None:
+    """BatteryState messages; the series-group voltages (V, NaN where not measured) go to ``cell_voltage``."""
     # rosbags makes the message classes at run time: their constants are not known to the type checker
     msg_cls: Any = ts.types[BATTERY_STATE_TYPE]
     header_cls = ts.types["std_msgs/msg/Header"]
@@ -268,7 +271,7 @@ def _write_battery_state(writer: _DigestingWriter, ts: Typestore, topic: str, st
             power_supply_health=msg_cls.POWER_SUPPLY_HEALTH_UNKNOWN,
             power_supply_technology=msg_cls.POWER_SUPPLY_TECHNOLOGY_UNKNOWN,
             present=True,
-            cell_voltage=empty,
+            cell_voltage=empty if group_v is None else group_v[k].astype(np.float32),
             cell_temperature=empty,
             location="",
             serial_number=serial,
