@@ -206,6 +206,7 @@ def fit_candidate(engine: Engine, cand: Candidate, params: PackParams, observed:
                   soc_box: Sequence[tuple[float, float]] | None = None) -> CandidateResult:
     """Fit ``cand``'s extra parameters and the initial SOCs on the fit parts; score the held-out parts."""
     tic = time.perf_counter()
+    before = engine.usage()
     theta, socs, res, fit_rmse = _fit_on(engine, cand, params, observed, soc_guess, budget, seed, soc_box)
     sims = [_predict(engine, cand, params, obs, theta, soc) for obs, soc in zip(observed, socs)]
     agg = pooled([held_out_score(obs, sim) for obs, sim in zip(observed, sims)])
@@ -213,7 +214,7 @@ def fit_candidate(engine: Engine, cand: Candidate, params: PackParams, observed:
                            heldout_rmse_mV=agg["heldout_rmse_mV"], heldout_r2_mod=agg["heldout_r2_mod"],
                            runtime_error_s=agg["runtime_error_s"], fit_rmse_mV=fit_rmse,
                            evaluations=res.evaluations, failures=res.failures, seconds=time.perf_counter() - tic,
-                           sims=sims)
+                           sims=sims, simulator=engine.usage_since(before))
 
 
 def fold_observed(observed: Sequence[Observed], held: int) -> list[Observed]:
@@ -226,12 +227,13 @@ def fit_candidate_fold(engine: Engine, cand: Candidate, params: PackParams, obse
                        soc_box: Sequence[tuple[float, float]] | None = None) -> dict[str, Any]:
     """One fold: fit on the other recordings whole and the first part of ``held``; predict ``held``."""
     tic = time.perf_counter()
+    before = engine.usage()
     fold = fold_observed(observed, held)
     theta, socs, res, fit_rmse = _fit_on(engine, cand, params, fold, soc_guess, budget, seed, soc_box)
     sim = _predict(engine, cand, params, observed[held], theta, socs[held])
     return {"theta": {k: float(v) for k, v in theta.items()}, "soc": socs[held], "sim": sim,
             "score": held_out_score(observed[held], sim), "fit_rmse_mV": fit_rmse, "evaluations": res.evaluations,
-            "failures": res.failures, "seconds": time.perf_counter() - tic}
+            "failures": res.failures, "seconds": time.perf_counter() - tic, "simulator": engine.usage_since(before)}
 
 
 def combine_folds(cause: str, observed: Sequence[Observed], folds: Sequence[dict[str, Any]]) -> CandidateResult:
@@ -249,9 +251,27 @@ def combine_folds(cause: str, observed: Sequence[Observed], folds: Sequence[dict
                           fit_rmse_mV=float(np.mean([f["fit_rmse_mV"] for f in folds])),
                           evaluations=sum(f["evaluations"] for f in folds),
                           failures=sum(f["failures"] for f in folds), seconds=sum(f["seconds"] for f in folds),
-                          sims=[f["sim"] for f in folds])
+                          sims=[f["sim"] for f in folds], simulator=pooled_usage([f.get("simulator", {}) for f in folds]))
     res.fitted_folds = [dict(f["theta"]) for f in folds]
     return res
+
+
+def pooled_usage(usages: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The solver usage of several fits (:meth:`Engine.usage_since`) summed."""
+    reasons: dict[str, int] = {}
+    for u in usages:
+        for r, n in u.get("pybamm_reasons", {}).items():
+            reasons[r] = reasons.get(r, 0) + int(n)
+    return {"engine_runs": sum(int(u.get("engine_runs", 0)) for u in usages),
+            "pybamm_runs": sum(int(u.get("pybamm_runs", 0)) for u in usages), "pybamm_reasons": reasons}
+
+
+def usage_note(usage: dict[str, Any]) -> str:
+    """``"; PyBaMM's solver for N runs: reason"`` when a fit left the SPM engine, else empty."""
+    if not usage.get("pybamm_runs"):
+        return ""
+    reasons = "; ".join(usage.get("pybamm_reasons", {}))
+    return f"; PyBaMM's solver for {usage['pybamm_runs']} of {usage['pybamm_runs'] + usage['engine_runs']} runs: {reasons}"
 
 
 # --------------------------------------------------------------------------- procedure
@@ -310,7 +330,8 @@ def _run_fits(engine: Engine, tasks: Sequence[tuple[int, Candidate]], params: Pa
             out[name] = combine_folds(name, obs, [parts[name][j] for j in range(len(obs))])
         done = out[name]
         _log(progress, f"{name}: " + (done if isinstance(done, str) else
-                                      f"held-out RMSE {done.heldout_rmse_mV:.1f} mV ({done.seconds:.0f} s)"))
+                                      f"held-out RMSE {done.heldout_rmse_mV:.1f} mV ({done.seconds:.0f} s"
+                                      f"{usage_note(done.simulator)})"))
 
     n_proc = min(workers, len(jobs)) if workers > 1 and len(jobs) > 1 else 1
     with ProcessPool(n_proc, shared={"diagnosis_fits": state}) as pool:

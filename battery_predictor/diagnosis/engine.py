@@ -25,9 +25,9 @@ Electrode thicknesses are folded into the volume fractions for the isothermal SP
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
+from collections import Counter, OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -36,12 +36,15 @@ import numpy.typing as npt
 from battery_predictor.errors import InputDataError, SimulationError
 from battery_predictor.params import INTERCONNECT_KEYS, PackParams, cached_parameter_values
 from battery_predictor.recording import Recording, ends_at_cutoff
+from battery_predictor.simulation import extensions as ext
+from battery_predictor.simulation.base import SimulationRequest
 from battery_predictor.simulation.cell_setup import (
     INPUT_SAFE_KEYS,
     build_model,
     prepared_parameter_values,
     quiet_pybamm,
 )
+from battery_predictor.simulation.engine import EngineSimulator
 from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
 from battery_predictor.simulation.extensions import cold_resistance_excess_ohm
 from battery_predictor.simulation.fast import THICKNESS_TO_FRACTION
@@ -316,6 +319,96 @@ class Post:
     anchor_k: float = 298.15
 
 
+#: Run values the SPM engine path takes as parameter values (the capacity-fade candidate's volume fractions).
+_ENGINE_VALUE_KEYS = frozenset({EPS_N, EPS_P})
+#: The hysteresis candidate's PyBaMM inputs, as the extension's values in ``cell.extra``.
+_HYSTERESIS_INPUTS = {ext.HYS_HALF_WIDTH: ext.HYS_HALF_WIDTH, ext.PYBAMM_HYS_INITIAL_KEY: ext.HYS_INITIAL,
+                      **{k: ext.HYS_DECAY for k in ext.PYBAMM_HYS_DECAY_KEYS}}
+
+
+def engine_params(params: PackParams, obs: Observed, values: dict, concentrations: tuple[float, float],
+                  post: Post) -> PackParams:
+    """The params a run of :meth:`Engine.simulate` means, for the SPM engine.
+
+    The run's values (volume fractions; the hysteresis inputs as the extension's values), its initial
+    concentrations (mol/m3), its cut-off (:func:`model_cutoff_v`) and a weak series group
+    (``post.weak_fraction``, as the extension ``cell_imbalance``). The contact resistance stays a
+    post-solve term (:func:`finish_run`).
+    """
+    pv = cached_parameter_values(params)
+    updates = {k: float(v) for k, v in values.items() if k in _ENGINE_VALUE_KEYS}
+    updates[C_N0], updates[C_P0] = (float(c) for c in concentrations)
+    updates["Lower voltage cut-off [V]"] = model_cutoff_v(float(pv["Lower voltage cut-off [V]"]), obs, params.series)
+    extra = dict(params.extra)
+    extensions = list(params.extensions)
+    for key, extra_key in _HYSTERESIS_INPUTS.items():
+        if key in values:
+            extra[extra_key] = float(values[key])
+    if post.weak_fraction != 1.0:
+        extensions.append("cell_imbalance")
+        extra[ext.WEAK_FRACTION] = float(post.weak_fraction)
+    out = replace(params, extensions=tuple(dict.fromkeys(extensions)), extra=extra)
+    return out.with_values(updates)
+
+
+def report_times(obs: Observed, t_end: float | None) -> np.ndarray:
+    """The times (s) a simulation of ``obs`` reports: the measurement times, then the tail grid, up to ``t_end``."""
+    t_all = np.concatenate([obs.t, obs.t_tail])
+    return t_all if t_end is None else t_all[t_all <= t_end + 1e-9]
+
+
+def finish_run(params: PackParams, obs: Observed, t_out: np.ndarray, v_cells: list[np.ndarray],
+               temperature_k: np.ndarray | None, *, reached: bool, end_time_s: float, r_eq: float, post: Post,
+               offset_a: float, cutoff_v: float) -> SimOut:
+    """A solved recording as a :class:`SimOut`: :class:`Post`'s terms applied to the cell voltages, the pack voltage.
+
+    Parameters
+    ----------
+    t_out : numpy.ndarray
+        Report times (s) the solver reached.
+    v_cells : list of numpy.ndarray
+        Cell terminal voltage (V) at ``t_out``: the normal cells', then the weak group's (if any).
+    temperature_k : numpy.ndarray or None
+        Cell temperature (K) at ``t_out``; needed when ``post`` has Arrhenius terms.
+    reached : bool
+        The solver stopped at the cut-off.
+    end_time_s : float
+        When the solver stopped (s).
+    r_eq : float
+        The pack's series resistance at the reference temperature (Ohm).
+    cutoff_v : float
+        The run's cell cut-off (V, :func:`model_cutoff_v`): a corrected voltage below it ends the run.
+    """
+    i_pack = obs.load.current_at(t_out) - offset_a
+    i_cell = i_pack / params.parallel
+    v_cells = [v - i_cell * post.contact_resistance_ohm for v in v_cells]
+    if post.cold_resistance_ohm:
+        assert temperature_k is not None  # the caller reads it whenever there is a cold resistance
+        drop = i_cell * cold_resistance_excess_ohm(post.cold_resistance_ohm, temperature_k, post.anchor_k)
+        v_cells = [v - drop for v in v_cells]
+    r_eq_t: float | np.ndarray = r_eq
+    if post.series_activation_j_mol:
+        assert temperature_k is not None  # the caller reads it whenever there is an activation energy
+        r_eq_t = r_eq * series_resistance_factor(temperature_k, post.series_activation_j_mol)
+    v_pack = pack_voltage_v(v_cells[0], i_pack, series=params.series, r_eq_ohm=r_eq_t,
+                            weak_cell_voltage_v=v_cells[1] if len(v_cells) > 1 else None)
+    # the cut-off sees each cell's share of the series resistance's temperature excess
+    excess_per_cell_v = i_pack * (r_eq_t - r_eq) / params.series
+    v_min = np.minimum.reduce([v - excess_per_cell_v for v in v_cells])
+    below = np.nonzero(v_min < cutoff_v)[0]
+    if below.size:  # the corrected voltage (contact drop / weak cell) reaches the cut-off first
+        n = max(int(below[0]), 1)
+        t_out, v_pack, v_min = t_out[:n], v_pack[:n], v_min[:n]
+        reached = True
+        end_time_s = float(t_out[-1])
+    if temperature_k is not None:
+        temperature_k = temperature_k[: t_out.size]
+    if not np.all(np.isfinite(v_pack)):
+        raise SimulationError("simulation produced non-finite voltages")
+    return SimOut(t=t_out, v_pack=v_pack, v_cell_min=v_min, reached_cutoff=bool(reached),
+                  end_time_s=float(end_time_s), temperature_k=temperature_k)
+
+
 # --------------------------------------------------------------------------- engine
 class Engine:
     """Builds each (structure, recording) once and re-solves it with ``[input]`` values.
@@ -326,16 +419,23 @@ class Engine:
         IDAKLU tolerances (as the fast simulator).
     cache_size : int
         Built simulations kept.
+    spm_engine : bool
+        Run what the SPM engine covers on it (:meth:`_simulate_on_engine`); False solves everything with
+        PyBaMM.
     """
 
-    def __init__(self, rtol: float = 1e-5, atol: float = 1e-7, cache_size: int = 48) -> None:
+    def __init__(self, rtol: float = 1e-5, atol: float = 1e-7, cache_size: int = 48, spm_engine: bool = True) -> None:
         self.rtol = rtol
         self.atol = atol
         self.cache_size = cache_size
         self._cache: OrderedDict = OrderedDict()
         self._windows: dict = {}
+        self._spm: EngineSimulator | None = EngineSimulator(fallback=None, cache_size=32) if spm_engine else None
         self.builds = 0
         self.solves = 0
+        #: Runs on the SPM engine, and PyBaMM solves by the reason the engine did not take them.
+        self.engine_runs = 0
+        self.pybamm_reasons: Counter[str] = Counter()
 
     # ------------------------------------------------------------------ state
     def stoichiometry_window(self, params: PackParams) -> tuple[float, float, float, float]:
@@ -474,6 +574,11 @@ class Engine:
 
         values = dict(values or {})
         offset_a = float(values.pop(OFFSET, offset_a))
+        on_engine = self._simulate_on_engine(params, obs, values, concentrations=concentrations, ambient_k=ambient_k,
+                                             t_end=t_end, extra_inputs=extra_inputs, post=post, offset_a=offset_a,
+                                             want_temperature=want_temperature, temperature_trace=temperature_trace)
+        if on_engine is not None:
+            return on_engine
         value_inputs = {k for k in values if k in INPUT_SAFE_KEYS}
         unused = set(values) - value_inputs - set(extra_inputs) - set(THICKNESS_TO_FRACTION) - set(INTERCONNECT_KEYS)
         if unused:
@@ -522,6 +627,71 @@ class Engine:
         r_eq = self._r_eq(params, values)
         return self._result(params, obs, sols, t_end, r_eq, post, offset_a, pv, want_temperature)
 
+    def usage(self) -> tuple[int, Counter[str]]:
+        """The runs so far: (on the SPM engine, PyBaMM solves by reason); see :meth:`usage_since`."""
+        return self.engine_runs, Counter(self.pybamm_reasons)
+
+    def usage_since(self, before: tuple[int, Counter[str]]) -> dict[str, Any]:
+        """Which solver ran the simulations since :meth:`usage` returned ``before`` (for the JSON)."""
+        reasons = Counter(self.pybamm_reasons)
+        reasons.subtract(before[1])
+        reasons = +reasons
+        return {"engine_runs": self.engine_runs - before[0], "pybamm_runs": sum(reasons.values()),
+                "pybamm_reasons": dict(reasons)}
+
+    def engine_reason(self, values: dict, extra_inputs: tuple[str, ...], post: Post,
+                      temperature_trace: bool) -> str | None:
+        """Why a run with these arguments needs PyBaMM's solver (None when the SPM engine may take it)."""
+        if self._spm is None:
+            return "the SPM engine is switched off"
+        if temperature_trace:
+            return "the cell follows the measured temperature, the engine one temperature per run"
+        if post.series_activation_j_mol or post.cold_resistance_ohm:
+            return "Arrhenius resistance terms"
+        other = sorted((set(extra_inputs) | set(values)) - _ENGINE_VALUE_KEYS - set(_HYSTERESIS_INPUTS))
+        if other:
+            return f"the engine does not take {', '.join(other)} as run inputs"
+        return None
+
+    def _simulate_on_engine(self, params: PackParams, obs: Observed, values: dict, *,
+                            concentrations: tuple[float, float], ambient_k: float, t_end: float | None,
+                            extra_inputs: tuple[str, ...], post: Post, offset_a: float, want_temperature: bool,
+                            temperature_trace: bool) -> SimOut | None:
+        """:meth:`simulate` on the SPM engine (exact stepping of PyBaMM's discretised SPM), or None.
+
+        The engine runs the same cell (PyBaMM's model and parameter values with the run's values,
+        initial concentrations and the run's cut-off) on the recorded current as steps; the
+        :class:`Post` terms are applied as after a PyBaMM solve (:func:`finish_run`). None, with the
+        reason counted in :attr:`pybamm_reasons`, when the run needs PyBaMM's solver.
+        """
+        reason = self.engine_reason(values, extra_inputs, post, temperature_trace)
+        spm_params = None
+        t_stop = float(obs.load.end_s) if t_end is None else min(float(t_end) + 3 * _EDGE_S, float(obs.load.end_s))
+        request = SimulationRequest(load=obs.load.truncate(t_stop).shift_current(-offset_a),
+                                    ambient_temperature_k=float(ambient_k), output_time_s=report_times(obs, t_end))
+        if reason is None:
+            spm_params = engine_params(params, obs, values, concentrations, post)
+            reason = EngineSimulator.unsupported_reason(spm_params, request)
+        if reason is None:
+            assert self._spm is not None and spm_params is not None  # engine_reason and the line above
+            try:
+                res = self._spm.simulate(spm_params, request)
+            except SimulationError as exc:
+                reason = f"engine: {exc}"
+        if reason is not None:
+            self.pybamm_reasons[reason] += 1
+            return None
+        self.engine_runs += 1
+        v_cells = list(np.asarray(res.extra["group_cell_voltage_v"], dtype=float))
+        temp = None
+        if want_temperature:
+            temp = np.asarray(res.extra.get("cell_temperature_k", np.full(res.time_s.size, float(ambient_k))))
+        cutoff_v = model_cutoff_v(float(cached_parameter_values(params)["Lower voltage cut-off [V]"]), obs,
+                                  params.series)
+        return finish_run(params, obs, res.time_s, v_cells, temp, reached=res.reached_cutoff,
+                          end_time_s=res.end_time_s, r_eq=self._r_eq(params, values), post=post, offset_a=offset_a,
+                          cutoff_v=cutoff_v)
+
     @staticmethod
     def _r_eq(params: PackParams, values: dict) -> float:
         p = dict(params.interconnect)
@@ -534,48 +704,20 @@ class Engine:
     def _result(self, params: PackParams, obs: Observed, sols: list[pybamm.Solution], t_end: float | None,
                 r_eq: float, post: Post, offset_a: float, pv: pybamm.ParameterValues,
                 want_temperature: bool) -> SimOut:
-        t_all = np.concatenate([obs.t, obs.t_tail])
-        if t_end is not None:
-            t_all = t_all[t_all <= t_end + 1e-9]
-        cutoff_v = model_cutoff_v(float(pv["Lower voltage cut-off [V]"]), obs, params.series)
+        t_all = report_times(obs, t_end)
         ends = [float(s.t[-1]) for s in sols]
         t_sol_end = min(ends)
         keep = np.minimum(t_all + 2 * _EDGE_S, obs.load.end_s - 2 * _EDGE_S) <= t_sol_end + 1e-9
         t_out = t_all[keep]
         t_eval = np.minimum(t_out + 2 * _EDGE_S, obs.load.end_s - 2 * _EDGE_S)
-        i_pack = obs.load.current_at(t_out) - offset_a
-        i_cell = i_pack / params.parallel
-        v_cells = [np.asarray(s["Terminal voltage [V]"](t_eval), dtype=float) - i_cell * post.contact_resistance_ohm
-                   for s in sols]
+        v_cells = [np.asarray(s["Terminal voltage [V]"](t_eval), dtype=float) for s in sols]
         temp = None
         if want_temperature or post.series_activation_j_mol or post.cold_resistance_ohm:
             temp = np.asarray(sols[0]["Volume-averaged cell temperature [K]"](t_eval), dtype=float)
-        if post.cold_resistance_ohm:
-            assert temp is not None  # read above whenever there is a cold resistance
-            drop = i_cell * cold_resistance_excess_ohm(post.cold_resistance_ohm, temp, post.anchor_k)
-            v_cells = [v - drop for v in v_cells]
-        r_eq_t: float | np.ndarray = r_eq
-        if post.series_activation_j_mol:
-            assert temp is not None  # read above whenever there is an activation energy
-            r_eq_t = r_eq * series_resistance_factor(temp, post.series_activation_j_mol)
         reached = any(s.termination and "Minimum voltage" in str(s.termination) for s in sols)
-        v_pack = pack_voltage_v(v_cells[0], i_pack, series=params.series, r_eq_ohm=r_eq_t,
-                                weak_cell_voltage_v=v_cells[1] if len(v_cells) > 1 else None)
-        # the cut-off sees each cell's share of the series resistance's temperature excess
-        excess_per_cell_v = i_pack * (r_eq_t - r_eq) / params.series
-        v_min = np.minimum.reduce([v - excess_per_cell_v for v in v_cells])
-        below = np.nonzero(v_min < cutoff_v)[0]
-        if below.size:  # the corrected voltage (contact drop / weak cell) reaches the cut-off first
-            n = max(int(below[0]), 1)
-            t_out, v_pack, v_min, t_eval = t_out[:n], v_pack[:n], v_min[:n], t_eval[:n]
-            reached = True
-            t_sol_end = float(t_out[-1])
-        if temp is not None:
-            temp = temp[: t_out.size]
-        if not np.all(np.isfinite(v_pack)):
-            raise SimulationError("simulation produced non-finite voltages")
-        return SimOut(t=t_out, v_pack=v_pack, v_cell_min=v_min, reached_cutoff=bool(reached),
-                      end_time_s=float(t_sol_end), temperature_k=temp)
+        cutoff_v = model_cutoff_v(float(pv["Lower voltage cut-off [V]"]), obs, params.series)
+        return finish_run(params, obs, t_out, v_cells, temp, reached=reached, end_time_s=t_sol_end, r_eq=r_eq,
+                          post=post, offset_a=offset_a, cutoff_v=cutoff_v)
 
 
 def _evaluate_ocp(fn: Callable[..., Any] | tuple, sto: np.ndarray,

@@ -35,6 +35,8 @@ class CandidateResult:
     reason: str = ""
     sims: list[SimOut] = field(default_factory=list, repr=False)
     fitted_folds: list[dict[str, float]] = field(default_factory=list)
+    #: Which solver ran the fit's simulations (:meth:`~battery_predictor.diagnosis.engine.Engine.usage_since`).
+    simulator: dict[str, Any] = field(default_factory=dict)
 
     def metrics(self) -> dict[str, Any]:
         return {"heldout_rmse_mV": self.heldout_rmse_mV, "heldout_r2_mod": self.heldout_r2_mod,
@@ -47,6 +49,8 @@ class CandidateResult:
                "initial_soc": list(self.socs), "evaluations": self.evaluations, "seconds": self.seconds}
         if self.fitted_folds:
             out["fitted_folds"] = [dict(f) for f in self.fitted_folds]
+        if self.simulator:
+            out["simulator"] = dict(self.simulator)
         if not self.applicable:
             out["not_applicable"] = self.reason
         return out

@@ -23,7 +23,8 @@ is simulated by the fallback simulator (the fast one by default); the result say
 The extension ``cell_imbalance`` runs its weak series group as a second parameter set of the same
 extraction (electrode height x the weak fraction, the same initial concentrations): the pack voltage
 is ``(series - 1) V_normal + V_weak - I R_eq`` and the run ends with the group that reaches the
-cut-off first.
+cut-off first Every result carries each group's cell terminal voltage at the report times
+(``extra["group_cell_voltage_v"]``, shape (groups, times): the normal cells', then the weak group's).
 
 The extension ``hysteresis`` (PyBaMM's one-state Axen OCP hysteresis) runs on isothermal cells: the cell
 is extracted without the option and the hysteresis voltage is stepped exactly beside it
@@ -516,6 +517,7 @@ class EngineSimulator:
             seconds=time.perf_counter() - tic,
             extra={"r_eq_ohm": r_eq, "engine_seconds": engine_s, "engine_backend": runs.extra["backend"],
                    "thermal": "isothermal" if model.thermal is None else "lumped",
+                   "group_cell_voltage_v": np.asarray(v_cells),
                    **({} if cell_temperature_k is None else {"cell_temperature_k": cell_temperature_k})},
         )
 
@@ -554,6 +556,7 @@ class EngineSimulator:
             seconds=time.perf_counter() - tic,
             extra={"r_eq_ohm": r_eq, "engine_seconds": engine_s, "engine_backend": run.backend,
                    "thermal": "isothermal", "hysteresis_state": run.hysteresis_state,
+                   "group_cell_voltage_v": np.asarray(run.cell_voltage_v)[None, :],
                    "final_hysteresis_state": run.final_state},
         )
 
