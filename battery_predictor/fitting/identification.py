@@ -26,6 +26,7 @@ from battery_predictor.fitting.identifiable import Coordinate, electrode_basis, 
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording, ends_at_cutoff
 from battery_predictor.simulation.base import PackSimResult, PackSimulator
+from battery_predictor.simulation.extensions import with_cold_window_anchors
 
 if TYPE_CHECKING:
     import optuna
@@ -259,6 +260,9 @@ class IdentificationProblem:
     group_voltages: bool = True
 
     def __post_init__(self) -> None:
+        # every candidate narrows a cold window towards the start's anchors: the same coordinates give the
+        # same model whatever ran before, and one engine extraction serves every candidate
+        self.params = with_cold_window_anchors(self.params)
         n = len(self.recordings)
         self._basis = electrode_basis(self.params)
         self._grids = [ResidualGrid.for_recording(r, padding_s(r, self.extend_fraction), n) for r in self.recordings]
