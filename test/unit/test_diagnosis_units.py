@@ -111,25 +111,6 @@ def test_current_offset_drives_the_model_with_the_corrected_current(temi, temi_r
     assert req.load.current_a[:5] == pytest.approx(res.pack_current_a[:5])
 
 
-def test_weak_group_two_cell_model_matches_liionpack_per_cell_values(temi):
-    from battery_predictor.simulation.liionpack_sim import LiionpackSimulator
-
-    load = _usage_load(hours=1.0, seed=2)
-    params = replace(temi, extensions=("cell_imbalance",), extra={ext.WEAK_FRACTION: 0.8})
-    assert ext.imbalance_cell_inputs(params)["Electrode height [m]"][:: temi.series] == pytest.approx(
-        0.8 * temi.value("Electrode height [m]"))
-    req = SimulationRequest(load=load, initial_soc=0.35, output_time_s=np.arange(0, load.end_s, 10.0))
-    lp_run = LiionpackSimulator(period_s=10.0).simulate(params, req)
-    fast_run = FastPackSimulator().simulate(params, req)
-    eng = Engine()
-    obs = observe(_recording(lp_run), temi)
-    sim = eng.simulate(temi, obs, concentrations=eng.concentrations_for_soc(temi, 0.35), ambient_k=298.15,
-                       post=Post(weak_fraction=0.8))
-    n = min(sim.t.size, lp_run.time_s.size, fast_run.time_s.size) - 1
-    assert np.sqrt(np.mean((sim.v_pack[:n] - lp_run.pack_voltage_v[:n]) ** 2)) < 0.01
-    assert np.max(np.abs(sim.v_pack[:n] - fast_run.pack_voltage_v[:n])) < 0.003
-    plain = FastPackSimulator().simulate(temi, req)
-    assert fast_run.end_time_s < plain.end_time_s  # the weak group ends the discharge earlier
 
 
 def test_capacity_fade_state_keeps_pybamm_soc_meaning(temi):
