@@ -183,11 +183,24 @@ def test_params_directory_is_named_a_directory():
 
 
 def test_repeated_timestamp_says_so_and_names_duplicate_times(tmp_path):
-    # diagnose keeps the last row of a repeated time by default (issue 12); simulate and fit refuse
+    # every command keeps the last row of a repeated time by default (cycler exports repeat the time at step
+    # changes, as the LG M50 files of ../shared/data do); --duplicate-times error refuses them with the way out
     body = "0,16.0,2.0\n5,15.99,2.0\n5,15.98,2.0\n10,15.97,2.0\n"
-    message = _one_line_error(_run("simulate", "--params", TEMI, "--data", _csv(tmp_path, body)),
+    message = _one_line_error(_run("simulate", "--params", TEMI, "--data", _csv(tmp_path, body),
+                                   "--duplicate-times", "error"),
                               "repeats the time of line 3", "use --duplicate-times keep_last")
     assert "not greater than" not in message
+
+
+def test_data_commands_keep_the_last_row_of_a_repeated_time_by_default():
+    from battery_predictor.cli.main import build_parser
+
+    parser = build_parser()
+    for argv in (["simulate", "--params", TEMI, "--data", "x.csv"],
+                 ["fit", "--params", TEMI, "--data", "x.csv", "--out", "f.yaml"],
+                 ["evaluate-runtime", "--params", TEMI, "--data", "x.csv"],
+                 ["bag", "from-csv", "x.csv", "b"]):
+        assert parser.parse_args(argv).duplicate_times == "keep_last", argv
 
 
 # --------------------------------------------------------------------------- 5. progress on waits
