@@ -348,7 +348,11 @@ class PredictorCore:
             cached = self._cal
             if cached is not None and cached[0] == stamp:
                 return cached[2]
-            if (cached is not None and cached[2].state is not None and not cached[2].clipped
+            # a state clipped above full is carried as well: the cell cannot hold more than the model's top, so the
+            # charge drawn since bounds it from above, while a fresh calibration would put it back at the top
+            # minus the calibration window's charge on every window (a flat-OCV LiFePO4 cell above the model's
+            # voltage answered the same runtime for half a discharge)
+            if (cached is not None and cached[2].state is not None and cached[2].clipped in ("", "above_full")
                     and stamp - cached[1] < self.config.recalibrate_after_s and stamp > cached[0]):
                 propagated = self._propagate(cached, hist, temperature_k)
                 if propagated is not None:
@@ -386,12 +390,16 @@ class PredictorCore:
         if run.final_state is None or run.reached_cutoff:
             return None
         residual = float(run.pack_voltage_v[-1]) - hist[-1][1]
-        if abs(residual) > self.state_tolerance_v:
+        # carried from above full, a model voltage below the measurement is what clipped the state: the
+        # measurement asks for more charge than the model holds, charge counting is the bound
+        still_above = cached[2].clipped == "above_full" and residual < -self.state_tolerance_v
+        if abs(residual) > self.state_tolerance_v and not still_above:
             with self._lock:
                 self.events.append((hist[-1][0], f"propagated state {residual:+.2f} V off the measurement: "
                                                   "recalibrated"))
             return None
-        cal = Calibration(self._runner().soc_of(run.final_state), residual, "", run.final_state, residual)
+        cal = Calibration(self._runner().soc_of(run.final_state), residual, "above_full" if still_above else "",
+                          run.final_state, residual)
         self._cal = (hist[-1][0], cached[1], cal)
         return cal
 
