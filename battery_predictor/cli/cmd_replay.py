@@ -74,6 +74,7 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
         raise InputDataError(f"--rate is {rate} (must be >= 0)")
     out = check_output_dir(out_dir or default_output_dir(bag), "--out")
     stream = read_replay_stream(bag)
+    _warn_if_sparse(stream, params)
     bag_out, png = _prepared_output(out, overwrite)
     overrides: dict[str, Any] = {}
     if pack:
@@ -88,6 +89,58 @@ def replay_bag(bag: str, params: str, *, rate: float = 1.0, out_dir: str | Path 
         if own is not None:
             own.try_shutdown()
     return _summary(stream, result, bag_out, png)
+
+
+def sparse_input_warning(source: str, sample_times_s: Any, limits_s: dict[str, float]) -> str | None:
+    """Why most answers of a replay will be stale, or None: the bag's battery samples are typically further
+    apart (median gap) than a node's ``stale_after_s`` (``limits_s``: node name -> s).
+
+    ``evaluate-runtime`` averages the same recording into windows without a notion of staleness, so without
+    this a replay of a sparsely sampled recording (the LG M50's 20-60 s records) disagrees with it silently.
+    """
+    import numpy as np
+
+    t = np.asarray(sample_times_s, dtype=float)
+    gaps = np.diff(t[np.isfinite(t)])
+    gaps = gaps[gaps > 0]
+    if not gaps.size:
+        return None
+    typical = float(np.median(gaps))
+    over = {name: lim for name, lim in limits_s.items() if math.isfinite(lim) and typical > lim}
+    if not over:
+        return None
+    names = ", ".join(f"{name} stale_after_s {lim:g} s" for name, lim in over.items())
+    return (f"{source}: its battery samples are {typical:.0f} s apart (median), more than {names}: most runtime "
+            "answers will be stale (invalid); raise stale_after_s in the node params file for this recording")
+
+
+def _warn_if_sparse(stream: ReplayStream, params: str) -> None:
+    """Warn (one line) when the bag's samples are too sparse for the node params' ``stale_after_s``."""
+    import warnings
+
+    import yaml
+
+    from battery_predictor.errors import BatteryPredictorError
+    from battery_predictor.monitor.core import MonitorConfig
+    from battery_predictor.prediction.core import PredictorConfig
+
+    try:
+        data = yaml.safe_load(Path(params).read_text()) or {}
+        rec = stream.recording(drop_nan=True)
+    except (BatteryPredictorError, OSError, yaml.YAMLError):
+        return
+
+    def limit(node: str, default: float) -> float:
+        section = data.get(node) if isinstance(data, dict) else None
+        values = section.get("ros__parameters", {}) if isinstance(section, dict) else {}
+        value = values.get("stale_after_s", default) if isinstance(values, dict) else default
+        return float(value) if isinstance(value, (int, float)) else default
+
+    message = sparse_input_warning(stream.source, rec.time_s,
+                                   {"battery_monitor": limit("battery_monitor", MonitorConfig.stale_after_s),
+                                    "predictor": limit("predictor", PredictorConfig.stale_after_s)})
+    if message:
+        warnings.warn(message, stacklevel=2)
 
 
 def _prepared_output(out: Path, overwrite: bool) -> tuple[Path, Path]:

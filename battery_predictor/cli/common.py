@@ -66,8 +66,12 @@ def print_json(obj: dict[str, Any]) -> None:
 
 def add_input_check_arguments(parser: argparse.ArgumentParser) -> None:
     """``--duplicate-times``, ``--drop-nan`` and ``--no-sign-check``: the ways out of the input checks."""
-    parser.add_argument("--duplicate-times", choices=("error", "keep_first", "keep_last"), default="error",
-                        help="CSV rows that repeat a timestamp: reject (default) or keep one")
+    # cycler exports repeat the time at step changes (the later row starts the new step; the LG M50 and
+    # Panasonic files of ../shared/data do): the last row of each repeated time is kept by default, as
+    # diagnose always did; 'error' refuses them. Time going backwards is refused whatever the choice.
+    parser.add_argument("--duplicate-times", choices=("error", "keep_first", "keep_last"), default="keep_last",
+                        help="CSV rows that repeat a timestamp: keep the last row of each (default: the later row "
+                             "starts the new step), keep the first, or reject ('error')")
     parser.add_argument("--drop-nan", action="store_true",
                         help="drop rows with an empty/NaN time, voltage or current (fill temperature gaps)")
     parser.add_argument("--no-sign-check", dest="expect_discharge", action="store_false",

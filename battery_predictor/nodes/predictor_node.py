@@ -64,6 +64,7 @@ from battery_predictor.nodes.messages import (
 )
 from battery_predictor.params_checks import check_node_voltages
 from battery_predictor.prediction.core import (
+    DRIFT_CORRECTIONS,
     LOAD_MODELS,
     PEAK_SOURCES,
     STATUS_MODEL_FAILED,
@@ -273,6 +274,11 @@ class PredictorNode(Node):
                 "Accepted probability that a route (or a task with the walk back to the charger) ends below its "
                 "threshold: accepted only when the voltage the pack stays above with probability 1 - decision_risk "
                 "is at or above it (0.1 = the P10 voltage; 0.5 = the P50, as the paper).", 0.001, 0.5),
+            drift_correction=declare_str(
+                self, "drift_correction", PredictorConfig.drift_correction,
+                "A carried state more than state_tolerance_v_per_cell off the measurement is recalibrated onto "
+                "it ('full') or just inside the tolerance, half of it left on the side it left ('smallest'; "
+                "for flat-OCV cells such as LiFePO4).", DRIFT_CORRECTIONS),
             simulator=declare_str(self, "simulator", PredictorConfig.simulator,
                                   "Pack model: 'auto' (the SPM engine unless the params activate extensions, then "
                                   "PyBaMM's solver), 'engine' or 'pybamm'.", BACKENDS),

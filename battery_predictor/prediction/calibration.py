@@ -152,7 +152,7 @@ def history_segments(time_s: npt.ArrayLike, current_a: npt.ArrayLike,
 def calibrate_on_history(runner: PackModel, time_s: npt.ArrayLike, voltage_v: npt.ArrayLike, current_a: npt.ArrayLike,
                          temperature_k: float, *,
                          window_s: float = 600.0, match_s: float = 120.0, max_segments: int = 12,
-                         tol_soc: float = 5e-4) -> Calibration:
+                         tol_soc: float = 5e-4, target_residual_v: float = 0.0) -> Calibration:
     """Calibrate on the last ``window_s`` of history; returns the present SOC and state.
 
     Parameters
@@ -165,6 +165,10 @@ def calibrate_on_history(runner: PackModel, time_s: npt.ArrayLike, voltage_v: np
         History simulated from the unknown start SOC.
     match_s : float
         The last part of the window whose mean voltage must be reproduced.
+    target_residual_v : float
+        Simulated minus measured mean voltage the solution should leave, V (0: reproduce the measurement;
+        the predictor's smallest correction of a drifted state leaves part of its tolerance). Ignored when
+        the history is too short to calibrate on.
     """
     t = np.asarray(time_s, dtype=float)
     v = np.asarray(voltage_v, dtype=float)
@@ -192,9 +196,10 @@ def calibrate_on_history(runner: PackModel, time_s: npt.ArrayLike, voltage_v: np
             return _PAST_CUTOFF
         holder[soc] = run
         sim = np.interp(rel[match], run.time_s, run.pack_voltage_v)
-        return float(np.mean(sim - v[match]))
+        return float(np.mean(sim - v[match])) - target_residual_v
 
     soc0, res, clipped = _solve_monotone(f, runner.soc_bounds, tol_soc)
+    res = res + target_residual_v if res > _PAST_CUTOFF else res
     run = holder.get(soc0)
     if run is None or run.final_state is None:
         return Calibration(soc0, res, clipped)

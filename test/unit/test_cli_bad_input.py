@@ -14,6 +14,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -183,11 +184,24 @@ def test_params_directory_is_named_a_directory():
 
 
 def test_repeated_timestamp_says_so_and_names_duplicate_times(tmp_path):
-    # diagnose keeps the last row of a repeated time by default (issue 12); simulate and fit refuse
+    # every command keeps the last row of a repeated time by default (cycler exports repeat the time at step
+    # changes, as the LG M50 files of ../shared/data do); --duplicate-times error refuses them with the way out
     body = "0,16.0,2.0\n5,15.99,2.0\n5,15.98,2.0\n10,15.97,2.0\n"
-    message = _one_line_error(_run("simulate", "--params", TEMI, "--data", _csv(tmp_path, body)),
+    message = _one_line_error(_run("simulate", "--params", TEMI, "--data", _csv(tmp_path, body),
+                                   "--duplicate-times", "error"),
                               "repeats the time of line 3", "use --duplicate-times keep_last")
     assert "not greater than" not in message
+
+
+def test_data_commands_keep_the_last_row_of_a_repeated_time_by_default():
+    from battery_predictor.cli.main import build_parser
+
+    parser = build_parser()
+    for argv in (["simulate", "--params", TEMI, "--data", "x.csv"],
+                 ["fit", "--params", TEMI, "--data", "x.csv", "--out", "f.yaml"],
+                 ["evaluate-runtime", "--params", TEMI, "--data", "x.csv"],
+                 ["bag", "from-csv", "x.csv", "b"]):
+        assert parser.parse_args(argv).duplicate_times == "keep_last", argv
 
 
 # --------------------------------------------------------------------------- 5. progress on waits
@@ -332,3 +346,16 @@ def test_warnings_print_as_one_line_without_the_source_and_main_restores_the_for
     before = warnings.formatwarning
     assert cli_main.main(["simulate", "--params", "no_such_params.yaml", "--data", "no_such.csv"]) == 2
     assert warnings.formatwarning is before  # the command line's format does not leak into a caller
+
+
+def test_replay_warns_when_the_bags_samples_are_further_apart_than_stale_after_s():
+    # the LG M50 0.1C records are sampled every 20-60 s: through nodes with stale_after_s 15 / 30 s nearly every
+    # answer was stale (7 of 1013 valid) while evaluate-runtime, which has no staleness, answered all 9 checkpoints
+    from battery_predictor.cli.cmd_replay import sparse_input_warning
+
+    sparse = np.arange(0.0, 3600.0, 60.0)
+    message = sparse_input_warning("lg.bag", sparse, {"battery_monitor": 15.0, "predictor": 30.0})
+    assert message is not None
+    assert "60 s apart" in message and "battery_monitor stale_after_s 15 s" in message and "predictor" in message
+    assert sparse_input_warning("lg.bag", sparse, {"battery_monitor": 90.0, "predictor": 90.0}) is None
+    assert sparse_input_warning("dense.bag", np.arange(0.0, 600.0, 1.0), {"battery_monitor": 15.0}) is None

@@ -137,7 +137,7 @@ def test_cli_checks_every_file_before_evaluating_any(model_discharge_csv, tmp_pa
     repeated = tmp_path / "repeated.csv"
     repeated.write_text("time_s,voltage_V,current_A\n0.0,4.1,1.0\n1.0,4.0,1.0\n1.0,4.0,1.0\n2.0,3.9,1.0\n")
     proc = subprocess.run([str(CLI), "evaluate-runtime", "--params", str(PARAMS), "--data", str(model_discharge_csv),
-                           str(repeated)], capture_output=True, text=True, timeout=120)
+                           str(repeated), "--duplicate-times", "error"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert "repeated.csv" in proc.stderr and "--duplicate-times keep_last" in proc.stderr
     assert proc.stdout == ""  # the good file was not evaluated first (minutes lost before the error)

@@ -150,3 +150,48 @@ def test_valid_exactly_when_status_ok_over_a_fuzzed_stream():
         else:
             assert answer.reason
     assert len(seen) >= 3, seen
+
+
+def test_a_state_above_the_models_full_is_carried_by_charge_not_reset_to_full():
+    # a cell whose voltage stays above what the model reaches at its top (the K2 LiFePO4 at 30-50 degC
+    # for half a discharge): every fresh calibration clips to the top minus the window's charge, so the state
+    # and the runtime stood still; carried by the measured current the state falls with the charge drawn
+    core = temi()
+    v_top = 18.0  # 0.56 V above the temi model's 17.44 V after 10 min at 2 A from its top SOC (tolerance 0.2 V)
+    last = feed(core, 0.0, 900.0, v_top, 2.0)
+    core.precalibrate()
+    first = core.calibration(T_K)
+    assert first.clipped == "above_full"
+    t = last
+    for _ in range(24):  # 40 more minutes, the state checked window by window as the node does
+        for _ in range(20):
+            t += 5.0
+            core.update_state(t, v_top, 2.0, T_K)
+            core.precalibrate()
+    later = core.calibration(T_K)
+    drawn_soc = 2.0 * (t - last) / 3600.0 / core.runner.capacity_ah
+    assert later.clipped == "above_full"
+    assert first.soc - later.soc == pytest.approx(drawn_soc, rel=0.05)
+
+
+@pytest.mark.parametrize("correction", ["full", "smallest"])
+def test_a_drifted_state_moves_onto_the_measurement_or_just_inside_the_tolerance(correction):
+    # "smallest" leaves half the tolerance on the side the carried state left (a flat OCV: the voltage the model
+    # misses is a large part of the charge); "full" calibrates onto the measured voltage
+    core = PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml"), drift_correction=correction))
+    last = feed(core, 0.0, 900.0, 15.2, 2.0)
+    core.calibration(T_K)
+    v, cal, t = 15.2, None, last
+    while not any("propagated state" in why for _, why in core.events):
+        v -= 0.03  # the measurement falls faster than the charge drawn explains: the model's state is above it
+        t += 5.0
+        core.update_state(t, v, 2.0, T_K)
+        cal = core.calibration(T_K)
+        assert t < last + 600.0, "the drift was never noticed"
+    expected = 0.5 * core.state_tolerance_v if correction == "smallest" else 0.0
+    assert cal.residual_v == pytest.approx(expected, abs=0.01)
+
+
+def test_an_unknown_drift_correction_is_refused():
+    with pytest.raises(ValueError, match="drift_correction"):
+        PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml"), drift_correction="half"))

@@ -25,6 +25,7 @@ from battery_predictor.prediction.uncertainty import (
     future_load_sigma,
     interval,
     route_charge_sigma_ah,
+    state_deviation_log,
     uncertainty_model,
 )
 from battery_predictor.profiles.ranger import RouteSection, longest_route
@@ -83,6 +84,15 @@ def test_interval_and_charge_deviation_bracket_the_median():
     spread = Spread({"a": 0.3, "model": 0.4}, {"a": 0.1, "load_kind": 0.2})
     assert spread.total() == (pytest.approx(0.5), pytest.approx(0.3))  # an alternative model adds, spreads combine
     assert spread.with_model_sigma(0.0).total() == (pytest.approx(0.3), pytest.approx(0.3))
+
+
+def test_the_state_spread_never_puts_more_charge_in_the_cell_than_the_top_of_its_range():
+    # a flat OCV turns a voltage residual into a huge SOC spread; the longer side stops at the model's top
+    lower, upper = state_deviation_log(0.9, 0.5, 1.05, 2.6, 1.0)
+    assert upper == pytest.approx(math.log1p(0.55 * 2.6 / 1.0))
+    assert lower == charge_deviation_log(0.9 * 2.6, 1.0)[0]
+    assert state_deviation_log(0.1, 0.5, 1.05, 2.6, 1.0) == charge_deviation_log(0.26, 1.0)  # inside: unchanged
+    assert state_deviation_log(0.1, 1.2, 1.05, 2.6, 1.0)[1] == 0.0  # at or above the top: no longer side
 
 
 def test_activation_energy_scenario_is_a_temperature_further_from_the_reference():
