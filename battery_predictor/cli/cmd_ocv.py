@@ -17,7 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ocv", help="take a cell's open-circuit voltage from a low-rate test into its params")
     p.add_argument("--params", required=True, help="pack params YAML (its negative OCP and balance are kept)")
     p.add_argument("--data", required=True, metavar="FILE",
-                   help="low-rate test (CSV or rosbag2): a C/20-like discharge from full, optionally a charge after")
+                   help="low-rate test (CSV or rosbag2): a C/20-like discharge from full, optionally a charge after; "
+                        "or an OCV table (CSV: soc_percent or soc, ocv_V or ocv_mean_V, optional hysteresis_V)")
     p.add_argument("--branch", choices=("discharge", "mean"), default="discharge",
                    help="discharge branch raised by its starting step (default; the robots discharge), or the "
                         "mean of the discharge and charge branches")
@@ -35,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from battery_predictor.errors import InputDataError
     from battery_predictor.fitting import ocv
     from battery_predictor.io.loader import load_recording
+    from battery_predictor.io.ocv_table import is_ocv_table, load_ocv_table
     from battery_predictor.params import load_params
 
     out = check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
@@ -47,10 +49,13 @@ def run(args: argparse.Namespace) -> int:
     if not 4 <= terms <= 64:
         raise InputDataError(f"--terms {terms}: use 4..64")
     params = load_params(args.params)
-    recording = load_recording(args.data, expect_discharge=args.expect_discharge, drop_nan=args.drop_nan,
-                               duplicate_times=args.duplicate_times)
-    nominal = float(params.parameter_values()["Nominal cell capacity [A.h]"])
-    curve = ocv.pseudo_ocv(recording, nominal, parallel=params.parallel, branch=args.branch)
+    if is_ocv_table(args.data):
+        curve = ocv.ocv_from_table(load_ocv_table(args.data), ocv.params_capacity_ah(params), branch=args.branch)
+    else:
+        recording = load_recording(args.data, expect_discharge=args.expect_discharge, drop_nan=args.drop_nan,
+                                   duplicate_times=args.duplicate_times)
+        nominal = float(params.parameter_values()["Nominal cell capacity [A.h]"])
+        curve = ocv.pseudo_ocv(recording, nominal, parallel=params.parallel, branch=args.branch)
     fit = ocv.positive_ocp_values(params, curve, terms=terms)
     manual = dict(params.manual)
     manual.update(fit.manual_values)
@@ -74,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json(summary)
         return 0
-    print(f"OCV from {args.data}: {curve.method}; {curve.capacity_ah:.4f} Ah at {curve.discharge_current_a:.4f} A")
+    rate = f" at {curve.discharge_current_a:.4f} A" if curve.discharge_current_a > 0 else ""
+    print(f"OCV from {args.data}: {curve.method}; {curve.capacity_ah:.4f} Ah{rate}")
     for note in curve.notes:
         print(f"  {note}")
     print(f"positive OCP: {terms}-term series, {1000 * fit.rms_error_v:.1f} mV RMS "

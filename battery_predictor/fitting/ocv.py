@@ -26,6 +26,7 @@ import numpy as np
 
 from battery_predictor.errors import InputDataError, ParamsError
 from battery_predictor.fitting.identifiable import FARADAY_C_MOL
+from battery_predictor.io.ocv_table import OcvTable
 from battery_predictor.ocp import CONSTANT_KEY, PREFIX, SLOPE_KEY, evaluate, ocp_curves, sto_grid
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording
@@ -145,6 +146,55 @@ def pseudo_ocv(recording: Recording, nominal_capacity_ah: float, *, parallel: in
     if branch == "discharge":
         return _discharge_branch(soc, v_dis, volt, cur, d0, capacity, i_dis, notes)
     return _mean_of_branches(recording.source, soc, v_dis, t, cur, volt, d1, capacity, i_dis, notes)
+
+
+def ocv_from_table(table: OcvTable, capacity_ah: float, *, branch: str = "discharge") -> OcvCurve:
+    """The open-circuit voltage of a tabulated OCV (per cell; :func:`~battery_predictor.io.ocv_table.load_ocv_table`).
+
+    Parameters
+    ----------
+    table : OcvTable
+        State of charge and OCV (and, optionally, the hysteresis: half the charge/discharge gap).
+    capacity_ah : float
+        The cell's capacity in Ah between the table's 0 % and 100 % (a table does not give it;
+        :func:`params_capacity_ah` keeps the params').
+    branch : {"discharge", "mean"}
+        ``"discharge"`` (default): the table's mean minus its hysteresis (the branch every discharge
+        of the robots follows; the mean when the table has no hysteresis column, with a note);
+        ``"mean"``: the table's mean curve.
+
+    Raises
+    ------
+    InputDataError
+        An unknown branch, or a table that does not cover 0 .. 100 % (within 2 %).
+    """
+    if branch not in ("discharge", "mean"):
+        raise InputDataError(f"unknown OCV branch '{branch}' (use 'discharge' or 'mean')")
+    if table.soc[0] > 0.02 or table.soc[-1] < 0.98:
+        raise InputDataError(f"{table.source}: the table covers {100 * table.soc[0]:.0f}..{100 * table.soc[-1]:.0f} % "
+                             "of the state of charge; the OCV needs 0..100 %")
+    soc = np.linspace(0.0, 1.0, GRID_POINTS)
+    mean = np.interp(soc, table.soc, table.ocv_v)
+    notes = [f"tabulated OCV ({table.soc.size} points); capacity {capacity_ah:.4f} Ah from the params"]
+    if branch == "mean":
+        return OcvCurve(soc, mean, capacity_ah, 0.0, "table, mean curve", notes)
+    if table.hysteresis_v is None:
+        notes.append("the table has no hysteresis column: its mean curve stands for the discharge branch")
+        return OcvCurve(soc, mean, capacity_ah, 0.0, "table, mean curve (no hysteresis given)", notes)
+    v_dis = mean - np.interp(soc, table.soc, table.hysteresis_v)
+    return OcvCurve(soc, v_dis, capacity_ah, 0.0, "table, discharge branch (mean minus hysteresis)", notes)
+
+
+def params_capacity_ah(params: PackParams) -> float:
+    """The params' cell capacity in Ah between their 0 % and 100 % SOC open-circuit voltages."""
+    import pybamm
+
+    pv = params.parameter_values()
+    try:
+        x0, x100, _, _ = (float(v) for v in pybamm.lithium_ion.get_min_max_stoichiometries(pv))
+    except (ValueError, pybamm.SolverError) as exc:
+        raise ParamsError(f"{params.source}: no stoichiometry window for its OCV limits: {exc}") from None
+    return _window_capacity_ah(pv, x0, x100)
 
 
 def _discharge_branch(soc: np.ndarray, v_dis: np.ndarray, volt: np.ndarray, cur: np.ndarray, d0: int, capacity: float,
