@@ -250,6 +250,11 @@ def peak_crossing_s(runner: PackModel, start: RunStart, average: LoadPath, peak_
             hi = guess
     if hi - lo <= tolerance_s:
         return 0.5 * (lo + hi)
+    g_hi = g(hi)
+    if g_hi > 0.0 and hi == t_avg:
+        # a peak barely above the average (a constant-current discharge) still holds at the average-load
+        # crossing, which is interpolated between samples: the peak-load crossing is that crossing
+        return float(hi)
     try:
         root, result = brentq(g, lo, hi, xtol=tolerance_s, maxiter=max_runs, full_output=True, disp=False)
     except ValueError as exc:  # no sign change over the bracket: the model is not monotone here

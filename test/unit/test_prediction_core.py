@@ -21,7 +21,7 @@ from battery_predictor.prediction.core import (
     PredictorCore,
 )
 from battery_predictor.prediction.route import evaluate_route
-from battery_predictor.prediction.runtime import predict_remaining_runtime
+from battery_predictor.prediction.runtime import predict_remaining_runtime, time_to_voltage_s
 from battery_predictor.profiles.ranger import RouteSection, longest_route
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
 
@@ -211,6 +211,37 @@ def test_peak_no_higher_than_the_average_keeps_the_papers_runtime(temi_runner):
     avg = predict_remaining_runtime(temi_runner, 15.0, 2.0, 298.15, 2.0, 13.30, calibration=cal)
     low = predict_remaining_runtime(temi_runner, 15.0, 2.0, 298.15, 2.0, 13.30, calibration=cal, peak_current_a=1.5)
     assert low.remaining_s == avg.remaining_s and low.limited_by == "pack_cutoff"
+
+
+class _KneePack:
+    """A pack whose voltage steepens towards empty (4 V - (Ah drawn)^4 - 0.05 Ohm I), sampled every second."""
+
+    def run(self, start, segments, temperature_k):
+        from battery_predictor.simulation.base import SegmentRun
+
+        t, q, times, volts, cur = 0.0, 0.0, [0.0], [4.0], [segments[0][1]]
+        for duration, current in segments:
+            for dt in np.diff(np.append(np.arange(0.0, duration, 1.0), duration)):
+                t, q = t + dt, q + current * dt / 3600.0
+                times.append(t)
+                volts.append(4.0 - q ** 4 - 0.05 * current)
+                cur.append(current)
+        v = np.asarray(volts)
+        return SegmentRun(np.asarray(times), v, np.asarray(cur), [], bool(np.any(v <= 3.0)), t, None)
+
+
+def test_a_peak_equal_to_the_average_that_holds_at_the_sampled_average_crossing_ends_there():
+    from battery_predictor.prediction.runtime import LoadPath, peak_crossing_s
+    from battery_predictor.simulation.base import SegmentRun
+
+    pack = _KneePack()
+    fine = pack.run(0.0, [(4000.0, 1.0)], 298.15)
+    coarse = np.arange(0, fine.time_s.size, 300)  # the average run's report samples: the knee falls between two
+    average_run = SegmentRun(fine.time_s[coarse], fine.pack_voltage_v[coarse], fine.pack_current_a[coarse], [],
+                             True, float(fine.time_s[-1]), None)
+    t_avg = time_to_voltage_s(average_run.time_s, average_run.pack_voltage_v, 3.0)
+    crossing = peak_crossing_s(pack, 0.0, LoadPath.constant(1.0, 4000.0), 1.0, 298.15, 3.0, average_run)
+    assert crossing == pytest.approx(t_avg)
 
 
 def test_constant_power_ahead_raises_the_current_and_shortens_the_runtime(temi_runner):
