@@ -3,42 +3,23 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from battery_predictor.diagnosis.engine import Engine, Post, observe
-from battery_predictor.params import load_params
 from battery_predictor.recording import Recording
 from battery_predictor.simulation import SimulationRequest, StepLoad
 from battery_predictor.simulation import extensions as ext
 from battery_predictor.simulation.fast import FastPackSimulator
 
-PARAMS = Path(__file__).resolve().parents[2] / "params"
 
-
-@pytest.fixture(scope="module")
-def temi():
-    return load_params(PARAMS / "temi.yaml")
-
-
-def _usage_load(hours: float = 1.5, seed: int = 1) -> StepLoad:
+def test_weak_group_two_cell_model_matches_liionpack_per_cell_values(temi_params):
     from battery_predictor.profiles.temi import generate_usage_profile
-
-    prof = generate_usage_profile(seed=seed, max_duration_s=hours * 3600)
-    return StepLoad.from_profile(prof).scale_current(3.0).resample(10.0)
-
-
-def _recording(res) -> Recording:
-    return Recording(time_s=res.time_s, voltage_v=res.pack_voltage_v, current_a=res.pack_current_a,
-                     temperature_k=np.full(res.time_s.size, 298.15))
-
-
-def test_weak_group_two_cell_model_matches_liionpack_per_cell_values(temi):
     from battery_predictor.simulation.liionpack_sim import LiionpackSimulator
 
-    load = _usage_load(hours=1.0, seed=2)
+    temi = temi_params
+    load = StepLoad.from_profile(generate_usage_profile(seed=2, max_duration_s=3600.0)).scale_current(3.0).resample(10.0)
     params = replace(temi, extensions=("cell_imbalance",), extra={ext.WEAK_FRACTION: 0.8})
     assert ext.imbalance_cell_inputs(params)["Electrode height [m]"][:: temi.series] == pytest.approx(
         0.8 * temi.value("Electrode height [m]"))
@@ -46,7 +27,8 @@ def test_weak_group_two_cell_model_matches_liionpack_per_cell_values(temi):
     lp_run = LiionpackSimulator(period_s=10.0).simulate(params, req)
     fast_run = FastPackSimulator().simulate(params, req)
     eng = Engine()
-    obs = observe(_recording(lp_run), temi)
+    obs = observe(Recording(time_s=lp_run.time_s, voltage_v=lp_run.pack_voltage_v, current_a=lp_run.pack_current_a,
+                            temperature_k=np.full(lp_run.time_s.size, 298.15)), temi)
     sim = eng.simulate(temi, obs, concentrations=eng.concentrations_for_soc(temi, 0.35), ambient_k=298.15,
                        post=Post(weak_fraction=0.8))
     n = min(sim.t.size, lp_run.time_s.size, fast_run.time_s.size) - 1

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,27 +11,15 @@ from battery_predictor.lab.real_pack import (
     RealPack,
     RealPackSpec,
 )
-from battery_predictor.params import load_params
 from battery_predictor.simulation import SimulationRequest, StepLoad
 from battery_predictor.simulation.fast import FastPackSimulator
 
-PARAMS = Path(__file__).resolve().parents[2] / "params"
 
-
-@pytest.fixture(scope="module")
-def temi():
-    return load_params(PARAMS / "temi.yaml")
-
-
-def _small(params, series=1, parallel=2):
-    return dataclasses.replace(params, series=series, parallel=parallel)
-
-
-def test_real_pack_without_spread_matches_the_fast_simulator(temi):
+def test_real_pack_without_spread_matches_the_fast_simulator(temi_params):
     """Guards the liionpack input-order workaround: swapped inputs would be grossly off."""
     spec = RealPackSpec("p", seed=1, capacity_sigma=0.0, contact_resistance_sigma_ohm=0.0, heat_transfer_sigma=0.0,
                         contact_resistance_mean_ohm=0.01)
-    pack = RealPack(_small(temi), spec)
+    pack = RealPack(dataclasses.replace(temi_params, series=1, parallel=2), spec)
     load = StepLoad.from_durations([300.0, 300.0], [2.0, 4.0])
     trace = pack.simulate(load, period_s=5.0)
     assert trace.termination == "end_of_load" and len(trace.time_s) == 120
@@ -50,8 +37,9 @@ def test_real_pack_without_spread_matches_the_fast_simulator(temi):
     assert trace.temperature_k[-1] > trace.ambient_temperature_k + 0.05
 
 
-def test_real_pack_spread_and_stop_voltage(temi):
-    pack = RealPack(_small(temi), RealPackSpec("p", seed=4, capacity_sigma=0.05, contact_resistance_sigma_ohm=0.004))
+def test_real_pack_spread_and_stop_voltage(temi_params):
+    spec = RealPackSpec("p", seed=4, capacity_sigma=0.05, contact_resistance_sigma_ohm=0.004)
+    pack = RealPack(dataclasses.replace(temi_params, series=1, parallel=2), spec)
     load = StepLoad.constant(6.0, 3600.0)
     full = pack.simulate(load, period_s=10.0)
     stop_v = 0.5 * float(full.voltage_v[30] + full.voltage_v[31])  # liionpack stores float32
