@@ -17,7 +17,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from battery_predictor.params import load_params
+# Under pytest-xdist every worker process would start one Numba thread per core for the engine's parallel
+# kernels: share the cores out instead (set before anything imports Numba; an explicit setting wins).
+if os.environ.get("PYTEST_XDIST_WORKER_COUNT"):
+    os.environ.setdefault("NUMBA_NUM_THREADS", str(max(1, len(os.sched_getaffinity(0))
+                                                       // int(os.environ["PYTEST_XDIST_WORKER_COUNT"]))))
+
+from battery_predictor.params import load_params  # noqa: E402  (after the thread setting)
 from battery_predictor.recording import Recording
 
 REPO = Path(__file__).resolve().parents[1]
