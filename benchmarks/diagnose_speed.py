@@ -73,7 +73,8 @@ def _recording(params, load: StepLoad, soc0: float, seed: int, current_noise_a: 
     return Recording(res.time_s, v, i, np.full(res.time_s.size, 298.15))
 
 
-def bench(pack: str, hours: float, workers: int | None, tmp: Path, current_noise_a: float = 0.02) -> dict:
+def bench(pack: str, hours: float, workers: int | None, tmp: Path, current_noise_a: float = 0.02,
+          simulator: str = "engine") -> dict:
     params = load_params(REPO / "params" / f"{pack}.yaml")
     ref_load, soc0 = _load(pack, hours, 1)
     obs_load, _ = _load(pack, hours, 2)
@@ -84,7 +85,8 @@ def bench(pack: str, hours: float, workers: int | None, tmp: Path, current_noise
     obs_rec = _recording(aged, obs_load, soc0, 4, current_noise_a)
     obs = save_csv(obs_rec, tmp / f"{pack}_observed.csv", overwrite=True)
     cmd = [str(Path(sys.executable).parent / "battery-predictor"), "diagnose", "--params",
-           str(REPO / "params" / f"{pack}.yaml"), "--reference", str(ref), "--data", str(obs), "--json", "--quiet"]
+           str(REPO / "params" / f"{pack}.yaml"), "--reference", str(ref), "--data", str(obs), "--json", "--quiet",
+           "--simulator", simulator]
     if workers:
         cmd += ["--workers", str(workers)]
     tic = time.perf_counter()
@@ -97,7 +99,10 @@ def bench(pack: str, hours: float, workers: int | None, tmp: Path, current_noise
             "current_changes": int(np.count_nonzero(np.diff(obs_rec.current_a))), "seconds": seconds,
             "cause": out["cause"], "gain_pct": out["gain_pct"], "truth_contact_resistance_ohm": r_contact,
             "fitted": next(c["fitted"] for c in out["candidates"] if c["cause"] == "resistance_growth"),
-            "reference_fit_s": out["reference_fit"]["seconds"]}
+            "reference_fit_s": out["reference_fit"]["seconds"], "simulator": simulator,
+            "candidate_fit_s": sum(c["seconds"] for c in out["candidates"]),
+            "engine_runs": sum(c.get("simulator", {}).get("engine_runs", 0) for c in out["candidates"]),
+            "pybamm_runs": sum(c.get("simulator", {}).get("pybamm_runs", 0) for c in out["candidates"])}
 
 
 def main() -> int:
@@ -107,16 +112,21 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=None, help="diagnose --workers (default: the CLI's default)")
     ap.add_argument("--current-noise", type=float, default=0.02,
                     help="current sensor noise in A (std); 0 keeps the profile's steps only")
+    ap.add_argument("--simulators", nargs="+", default=["engine", "pybamm"], choices=("engine", "pybamm"),
+                    help="diagnose --simulator values, each run side by side on the same files")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
         for pack in args.packs:
-            r = bench(pack, args.hours, args.workers, Path(d), args.current_noise)
-            peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
-            print(f"{r['pack']}: {r['hours']:.2f} h observed + reference, {r['samples']} samples "
-                  f"({r['current_changes']} current changes) -> {r['seconds']:.0f} s wall "
-                  f"(reference fit {r['reference_fit_s']:.0f} s), peak RSS {peak:.0f} MB; named {r['cause']} "
-                  f"(gain {r['gain_pct']:.1f} %), contact resistance {r['fitted']} vs truth "
-                  f"{r['truth_contact_resistance_ohm']} Ohm", flush=True)
+            for simulator in args.simulators:
+                r = bench(pack, args.hours, args.workers, Path(d), args.current_noise, simulator)
+                peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
+                print(f"{r['pack']} [{simulator}: {r['engine_runs']} engine / {r['pybamm_runs']} PyBaMM candidate runs]: "
+                      f"{r['hours']:.2f} h observed + reference, {r['samples']} samples "
+                      f"({r['current_changes']} current changes) -> {r['seconds']:.0f} s wall "
+                      f"(reference fit {r['reference_fit_s']:.0f} s, candidate fits {r['candidate_fit_s']:.0f} s), "
+                      f"peak RSS {peak:.0f} MB (largest process so far); named {r['cause']} "
+                      f"(gain {r['gain_pct']:.1f} %), contact resistance {r['fitted']} vs truth "
+                      f"{r['truth_contact_resistance_ohm']} Ohm", flush=True)
     return 0
 
 

@@ -67,6 +67,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=None,
                    help="processes for the candidate fits and the reference fit's Jacobian (default: CPUs, at most 4)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument("--simulator", choices=("engine", "pybamm"), default="engine",
+                   help="candidate runs on the SPM engine where it covers them, PyBaMM's solver otherwise "
+                        "(default; each candidate's JSON row says which ran), or PyBaMM's solver for all")
     p.set_defaults(func=run)
 
 
@@ -105,7 +108,9 @@ def run(args: argparse.Namespace) -> int:
     params = load_params(args.params)
     observed = _load(args.data, args, params)
     references = _load(args.reference, args, params) if args.reference else []
-    diag = diagnose(params, observed, references,
+    from battery_predictor.diagnosis.engine import Engine
+
+    diag = diagnose(params, observed, references, engine=Engine(spm_engine=args.simulator == "engine"),
                     budget=args.budget or DEFAULT_BUDGET,
                     reference_budget=args.reference_budget or DEFAULT_REFERENCE_BUDGET,
                     fit_fraction=args.fit_fraction, causes=args.causes, seed=args.seed,

@@ -134,6 +134,22 @@ def test_diagnose_cli_reads_a_file_with_a_repeated_timestamp(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
 
 
+@pytest.mark.parametrize("simulator, on_engine", [("engine", True), ("pybamm", False)])
+def test_diagnose_cli_says_which_solver_ran_each_candidate(tmp_path, simulator, on_engine):
+    t = np.arange(0.0, 3600.0, 10.0)
+    path = tmp_path / "obs.csv"
+    path.write_text("\n".join(["time_s,voltage_V,current_A"] + [f"{x},{4.1 - x / 7200.0:.4f},1.0" for x in t]) + "\n")
+    proc = subprocess.run([CLI, "diagnose", "--params", str(PARAMS / "lgm50.yaml"), "--data", str(path),
+                           "--causes", "current_offset", "--budget", "4", "--quiet", "--workers", "1", "--json",
+                           "--simulator", simulator], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (row,) = [c for c in json.loads(proc.stdout)["candidates"] if c["cause"] == "current_offset"]
+    used = row["simulator"]
+    assert (used["engine_runs"] > 0) == on_engine and (used["pybamm_runs"] > 0) != on_engine
+    if not on_engine:
+        assert used["pybamm_reasons"] == {"the SPM engine is switched off": used["pybamm_runs"]}
+
+
 @pytest.mark.skipif(not (REPO / "docs" / "runtime_real_data" / "panasonic_ocv.yaml").is_file(),
                     reason="no params file with a measured OCP")
 def test_the_soc_window_of_a_measured_ocp_is_evaluated_with_its_parameters():
