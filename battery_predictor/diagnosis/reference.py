@@ -46,6 +46,11 @@ FALLBACK_BUDGET = 150
 #: another chemistry's OCPs (docs/identification.md). Only the excess over the noise counts (white
 #: noise no model can fit, :func:`~battery_predictor.diagnosis.decision.excess_mv`).
 POOR_EXCESS_MV_PER_CELL = 40.0
+#: The particle diffusivities, searched in a second identification that starts from the first one's
+#: result (:func:`identify_reference`). On a flat open-circuit voltage (LFP) the end of a working day
+#: is shaped by solid diffusion: a far-truth Ranger reference day (diffusivities x0.5-2 of the
+#: params') was fitted to 71.8 mV without them and 9.9 mV with them (docs/findings.md).
+TRANSPORT_COORDINATES = ("negative_diffusivity_m2_s", "positive_diffusivity_m2_s")
 
 
 @dataclass
@@ -90,6 +95,7 @@ class ReferenceFit:
     r2_mod_per_recording: list[float] = field(default_factory=list)
     simulator: str = "engine"
     series: int = 1
+    extra: list[str] = field(default_factory=list)
 
     @property
     def rmse_mV_per_cell(self) -> float:
@@ -101,7 +107,7 @@ class ReferenceFit:
                 "r2_mod_per_recording": list(self.r2_mod_per_recording),
                 "evaluations": self.evaluations, "values": dict(self.values), "initial_soc": list(self.socs),
                 "not_fitted": list(self.skipped), "seconds": self.seconds, "simulator": self.simulator,
-                "method": "identify"}
+                "method": "identify", "extra_coordinates": list(self.extra)}
 
 
 def _rms(values: Sequence[float]) -> float:
@@ -110,9 +116,14 @@ def _rms(values: Sequence[float]) -> float:
 
 
 def identify_reference(params: PackParams, references: Sequence[Recording], budget: int = DEFAULT_IDENTIFY_BUDGET,
-                       seed: int = 0, progress: Callable[[str], None] | None = None
+                       seed: int = 0, progress: Callable[[str], None] | None = None, noise_mv: float = 0.0
                        ) -> tuple[PackParams, ReferenceFit]:
     """Identify ``params`` on the reference recordings (``fit --method identify`` on the SPM engine).
+
+    On the engine, a second identification then also searches the particle diffusivities
+    (:data:`TRANSPORT_COORDINATES`, where the params give them as scalars), starting from the first
+    one's result with the same budget; it is kept only when it fits the references separably better
+    (:func:`transport_kept`), the rule by which the decision prefers the simpler of two candidates.
 
     Parameters
     ----------
@@ -125,6 +136,8 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
         cover, at most :data:`FALLBACK_BUDGET`.
     seed : int
         TPE seed.
+    noise_mv : float
+        Voltage noise of the references (mV; :func:`~battery_predictor.diagnosis.scoring.noise_level_v`).
 
     Returns
     -------
@@ -166,17 +179,79 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
 
     result = identify(problem, evaluations=max(int(budget), 2), seed=seed, progress=show)
     best = problem.score(result.coordinates)
+    evaluations = result.evaluations
+    extra: list[str] = []
+    if name == "engine":
+        transport = _transport_fit(params, references, simulator, result.coordinates, budget, seed, show)
+        if transport is not None:
+            t_problem, t_result, t_best = transport
+            evaluations += t_result.evaluations
+            basic_mv, t_mv = _rms(best.rmse_mv), _rms(t_best.rmse_mv)
+            kept = transport_kept(basic_mv, t_mv, noise_mv)
+            _log(progress, f"reference fit with the particle diffusivities: RMSE {t_mv:.1f} mV (without {basic_mv:.1f} "
+                           f"mV): {'kept' if kept else 'not separably better, not kept'}")
+            if kept:
+                problem, space, result, best = t_problem, t_problem.space, t_result, t_best
+                extra = list(TRANSPORT_COORDINATES)
     fitted = reachable_soc_window(params.with_values(best.values[0]), progress)
     states = [result.coordinates[c.name] for c in space if c.recording is not None]
     info = ReferenceFit(values={k: float(v) for k, v in result.coordinates.items() if not k.startswith("initial_ocv")},
                         socs=[float(s) for s in states], rmse_mV=_rms(best.rmse_mv), initial_rmse_mV=initial_rmse,
-                        evaluations=result.evaluations, skipped=[], seconds=time.perf_counter() - tic,
+                        evaluations=evaluations, skipped=[], seconds=time.perf_counter() - tic,
                         r2_mod=float(best.r2_mod), rmse_mV_per_recording=[float(x) for x in best.rmse_mv],
                         r2_mod_per_recording=[float(x) for x in best.per_recording], simulator=name,
-                        series=params.series)
+                        series=params.series, extra=extra)
     _log(progress, f"reference fit: RMSE {initial_rmse:.1f} -> {info.rmse_mV:.1f} mV, R2_mod {info.r2_mod:.4f} "
                    f"({info.evaluations} evaluations, {info.seconds:.0f} s)")
     return fitted, info
+
+
+def transport_kept(basic_rmse_mv: float, transport_rmse_mv: float, noise_mv: float) -> bool:
+    """Whether the fit with the particle diffusivities is separably better than the one without.
+
+    The decision's separability rule (:func:`~battery_predictor.diagnosis.decision.near_lowest`): the
+    fit without them is kept unless its error above the noise exceeds :data:`SEPARABILITY_FACTOR`
+    times the other's plus :data:`NEAR_NOISE_FRACTION` of the noise (two more searched values must
+    buy a difference the noise cannot explain).
+    """
+    from battery_predictor.diagnosis.decision import NEAR_NOISE_FRACTION, SEPARABILITY_FACTOR, excess_mv
+
+    if not math.isfinite(transport_rmse_mv):
+        return False
+    if not math.isfinite(basic_rmse_mv):
+        return True
+    margin = SEPARABILITY_FACTOR * excess_mv(transport_rmse_mv, noise_mv) + NEAR_NOISE_FRACTION * noise_mv
+    return excess_mv(basic_rmse_mv, noise_mv) > margin
+
+
+def _transport_fit(params: PackParams, references: Sequence[Recording], simulator, start: dict[str, float],
+                   budget: int, seed: int, show: Callable[[str, int, float], None]):
+    """The identification with :data:`TRANSPORT_COORDINATES` from ``start``: (problem, result, score), or None.
+
+    None when the params give a diffusivity as a function (not a scalar to search) or the fit fails.
+    """
+    import dataclasses
+    import warnings
+
+    from battery_predictor.errors import ParamsError
+    from battery_predictor.fitting.identifiable import default_space
+    from battery_predictor.fitting.identification import IdentificationProblem, identify
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            space = default_space(params, references, extra=TRANSPORT_COORDINATES)
+    except ParamsError:
+        return None
+    space = [dataclasses.replace(c, initial=min(max(float(start.get(c.name, c.initial)), c.low), c.high))
+             for c in space]
+    problem = IdentificationProblem(params=params, recordings=list(references), simulator=simulator, space=space)
+    try:
+        result = identify(problem, evaluations=max(int(budget), 2), seed=seed,
+                          progress=lambda phase, n, cost: show(f"with diffusivities, {phase}", n, cost))
+        return problem, result, problem.score(result.coordinates)
+    except BatteryPredictorError:
+        return None
 
 
 def reachable_soc_window(params: PackParams, progress: Callable[[str], None] | None = None) -> PackParams:
@@ -248,8 +323,8 @@ def _log(progress: Callable[[str], None] | None, msg: str) -> None:
         progress(msg)
 
 
-__all__ = ["DEFAULT_IDENTIFY_BUDGET", "POOR_EXCESS_MV_PER_CELL", "ReferenceFit", "excess_per_cell_mv",
-           "identify_reference", "reference_verdict"]
+__all__ = ["DEFAULT_IDENTIFY_BUDGET", "POOR_EXCESS_MV_PER_CELL", "ReferenceFit", "TRANSPORT_COORDINATES",
+           "excess_per_cell_mv", "identify_reference", "reference_verdict", "transport_kept"]
 
 
 def reference_anchor_k(temperature_traces_k: Sequence[npt.ArrayLike | None], currents_a: Sequence[npt.ArrayLike]
