@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.params import PackParams, cached_parameter_values
-from battery_predictor.recording import Recording
+from battery_predictor.recording import Recording, ends_at_cutoff
 
 #: Default evaluation budget of the reference identification on the SPM engine (the ``fit --method
 #: identify`` default: the Panasonic 25 degC fit at 1000 evaluations takes ~24 s on the engine).
@@ -81,6 +81,10 @@ class ReferenceFit:
         ``engine`` or the fallback's name.
     series : int
         Cells in series (for per-cell figures).
+    extra : list of str
+        Optional coordinates searched as well (:data:`TRANSPORT_COORDINATES` when they were kept).
+    end_padding : bool
+        Whether references ending at their minimum voltage were padded as stopped at their cut-off.
     """
 
     values: dict[str, float]
@@ -96,6 +100,7 @@ class ReferenceFit:
     simulator: str = "engine"
     series: int = 1
     extra: list[str] = field(default_factory=list)
+    end_padding: bool = False
 
     @property
     def rmse_mV_per_cell(self) -> float:
@@ -107,7 +112,8 @@ class ReferenceFit:
                 "r2_mod_per_recording": list(self.r2_mod_per_recording),
                 "evaluations": self.evaluations, "values": dict(self.values), "initial_soc": list(self.socs),
                 "not_fitted": list(self.skipped), "seconds": self.seconds, "simulator": self.simulator,
-                "method": "identify", "extra_coordinates": list(self.extra)}
+                "method": "identify", "extra_coordinates": list(self.extra),
+                "end_padding": self.end_padding}
 
 
 def _rms(values: Sequence[float]) -> float:
@@ -123,7 +129,12 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
     On the engine, a second identification then also searches the particle diffusivities
     (:data:`TRANSPORT_COORDINATES`, where the params give them as scalars), starting from the first
     one's result with the same budget; it is kept only when it fits the references separably better
-    (:func:`transport_kept`), the rule by which the decision prefers the simpler of two candidates.
+    (:func:`separably_better`), the rule by which the decision prefers the simpler of two candidates.
+    When a reference ends at its minimum voltage while discharging
+    (:func:`~battery_predictor.recording.ends_at_cutoff`), the seed paper's end padding asks the
+    model to be empty there; an identification without it runs too, and the padding is dropped when
+    that one fits the references separably better (the reference did not stop at its cut-off: an
+    LFP working day that ends on the onset of its knee fitted to 207.5 mV padded, 9.3 mV without).
 
     Parameters
     ----------
@@ -180,14 +191,31 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
     result = identify(problem, evaluations=max(int(budget), 2), seed=seed, progress=show)
     best = problem.score(result.coordinates)
     evaluations = result.evaluations
+    cutoff_ends = any(ends_at_cutoff(r) for r in references)
+    if cutoff_ends and name == "engine":
+        # the end padding assumes the recording stopped at its cut-off; the data test it
+        free = IdentificationProblem(params=params, recordings=list(references), simulator=simulator, space=space,
+                                     cutoff_ends=False)
+        f_result = identify(free, evaluations=max(int(budget), 2), seed=seed,
+                            progress=lambda phase, n, cost: show(f"without the end padding, {phase}", n, cost))
+        f_best = free.score(f_result.coordinates)
+        evaluations += f_result.evaluations
+        padded_mv, free_mv = _rms(best.rmse_mv), _rms(f_best.rmse_mv)
+        cutoff_ends = not separably_better(padded_mv, free_mv, noise_mv)
+        _log(progress, f"reference fit without the end padding (the references ending at their minimum voltage "
+                       f"taken as not stopped at their cut-off): RMSE {free_mv:.1f} mV (padded {padded_mv:.1f} mV): "
+                       f"{'padding kept' if cutoff_ends else 'separably better: the references did not stop at their cut-off'}")
+        if not cutoff_ends:
+            problem, result, best = free, f_result, f_best
     extra: list[str] = []
     if name == "engine":
-        transport = _transport_fit(params, references, simulator, result.coordinates, budget, seed, show)
+        transport = _transport_fit(params, references, simulator, result.coordinates, budget, seed, show,
+                                   cutoff_ends=problem.cutoff_ends)
         if transport is not None:
             t_problem, t_result, t_best = transport
             evaluations += t_result.evaluations
             basic_mv, t_mv = _rms(best.rmse_mv), _rms(t_best.rmse_mv)
-            kept = transport_kept(basic_mv, t_mv, noise_mv)
+            kept = separably_better(basic_mv, t_mv, noise_mv)
             _log(progress, f"reference fit with the particle diffusivities: RMSE {t_mv:.1f} mV (without {basic_mv:.1f} "
                            f"mV): {'kept' if kept else 'not separably better, not kept'}")
             if kept:
@@ -200,19 +228,20 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
                         evaluations=evaluations, skipped=[], seconds=time.perf_counter() - tic,
                         r2_mod=float(best.r2_mod), rmse_mV_per_recording=[float(x) for x in best.rmse_mv],
                         r2_mod_per_recording=[float(x) for x in best.per_recording], simulator=name,
-                        series=params.series, extra=extra)
+                        series=params.series, extra=extra,
+                        end_padding=problem.cutoff_ends and any(ends_at_cutoff(r) for r in references))
     _log(progress, f"reference fit: RMSE {initial_rmse:.1f} -> {info.rmse_mV:.1f} mV, R2_mod {info.r2_mod:.4f} "
                    f"({info.evaluations} evaluations, {info.seconds:.0f} s)")
     return fitted, info
 
 
-def transport_kept(basic_rmse_mv: float, transport_rmse_mv: float, noise_mv: float) -> bool:
-    """Whether the fit with the particle diffusivities is separably better than the one without.
+def separably_better(basic_rmse_mv: float, transport_rmse_mv: float, noise_mv: float) -> bool:
+    """Whether a fit with RMSE ``transport_rmse_mv`` is separably better than the ``basic`` one (mV).
 
     The decision's separability rule (:func:`~battery_predictor.diagnosis.decision.near_lowest`): the
-    fit without them is kept unless its error above the noise exceeds :data:`SEPARABILITY_FACTOR`
-    times the other's plus :data:`NEAR_NOISE_FRACTION` of the noise (two more searched values must
-    buy a difference the noise cannot explain).
+    basic fit (fewer searched values, or the seed paper's end padding) is kept unless its error above
+    the noise exceeds :data:`SEPARABILITY_FACTOR` times the other's plus :data:`NEAR_NOISE_FRACTION`
+    of the noise (a difference the noise cannot explain).
     """
     from battery_predictor.diagnosis.decision import NEAR_NOISE_FRACTION, SEPARABILITY_FACTOR, excess_mv
 
@@ -225,7 +254,7 @@ def transport_kept(basic_rmse_mv: float, transport_rmse_mv: float, noise_mv: flo
 
 
 def _transport_fit(params: PackParams, references: Sequence[Recording], simulator, start: dict[str, float],
-                   budget: int, seed: int, show: Callable[[str, int, float], None]):
+                   budget: int, seed: int, show: Callable[[str, int, float], None], cutoff_ends: bool = True):
     """The identification with :data:`TRANSPORT_COORDINATES` from ``start``: (problem, result, score), or None.
 
     None when the params give a diffusivity as a function (not a scalar to search) or the fit fails.
@@ -245,7 +274,8 @@ def _transport_fit(params: PackParams, references: Sequence[Recording], simulato
         return None
     space = [dataclasses.replace(c, initial=min(max(float(start.get(c.name, c.initial)), c.low), c.high))
              for c in space]
-    problem = IdentificationProblem(params=params, recordings=list(references), simulator=simulator, space=space)
+    problem = IdentificationProblem(params=params, recordings=list(references), simulator=simulator, space=space,
+                                    cutoff_ends=cutoff_ends)
     try:
         result = identify(problem, evaluations=max(int(budget), 2), seed=seed,
                           progress=lambda phase, n, cost: show(f"with diffusivities, {phase}", n, cost))
@@ -324,7 +354,7 @@ def _log(progress: Callable[[str], None] | None, msg: str) -> None:
 
 
 __all__ = ["DEFAULT_IDENTIFY_BUDGET", "POOR_EXCESS_MV_PER_CELL", "ReferenceFit", "TRANSPORT_COORDINATES",
-           "excess_per_cell_mv", "identify_reference", "reference_verdict", "transport_kept"]
+           "excess_per_cell_mv", "identify_reference", "reference_verdict", "separably_better"]
 
 
 def reference_anchor_k(temperature_traces_k: Sequence[npt.ArrayLike | None], currents_a: Sequence[npt.ArrayLike]

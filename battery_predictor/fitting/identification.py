@@ -133,8 +133,9 @@ class ResidualGrid:
     ends_at_cutoff: bool = True
 
     @classmethod
-    def for_recording(cls, rec: Recording, extend_s: float, n_recordings: int) -> ResidualGrid:
-        """The grid of ``rec`` with ``extend_s`` seconds of padding."""
+    def for_recording(cls, rec: Recording, extend_s: float, n_recordings: int,
+                      at_cutoff: bool | None = None) -> ResidualGrid:
+        """The grid of ``rec`` with ``extend_s`` seconds of padding (``at_cutoff``: default :func:`ends_at_cutoff`)."""
         t = rec.relative_time_s
         u = np.asarray(rec.voltage_v, dtype=float)
         u_min = float(u.min())
@@ -142,7 +143,7 @@ class ResidualGrid:
         extra = np.arange(t[-1] + dt, t[-1] + extend_s + 0.5 * dt, dt) if extend_s > 0 else np.empty(0)
         ss_tot = float(np.sum((u - u.mean()) ** 2)) or 1.0
         return cls(np.concatenate([t, extra]), np.concatenate([u, np.full(extra.size, u_min)]), u_min,
-                   1.0 / math.sqrt(n_recordings * ss_tot), ends_at_cutoff(rec))
+                   1.0 / math.sqrt(n_recordings * ss_tot), ends_at_cutoff(rec) if at_cutoff is None else at_cutoff)
 
     def residuals(self, result: PackSimResult | None) -> np.ndarray:
         """Weighted ``measured - predicted``: a continuous stand-in for R2_mod's comparison.
@@ -208,6 +209,9 @@ class IdentificationProblem:
         Simulations of a recording that ends at its cut-off run this fraction of its duration past
         its end, compared with its minimum voltage (late ends show); others are not padded
         (:func:`padding_s`).
+    cutoff_ends : bool
+        False: no recording is taken to end at its cut-off (none is padded, clipped or truncated),
+        whatever :func:`~battery_predictor.recording.ends_at_cutoff` says.
     """
 
     params: PackParams
@@ -215,11 +219,18 @@ class IdentificationProblem:
     simulator: PackSimulator
     space: list[Coordinate]
     extend_fraction: float = 0.2
+    cutoff_ends: bool = True
 
     def __post_init__(self) -> None:
         n = len(self.recordings)
         self._basis = electrode_basis(self.params)
-        self._grids = [ResidualGrid.for_recording(r, padding_s(r, self.extend_fraction), n) for r in self.recordings]
+        self._grids = [ResidualGrid.for_recording(r, self._padding_s(r), n, self._at_cutoff(r)) for r in self.recordings]
+
+    def _at_cutoff(self, rec: Recording) -> bool:
+        return self.cutoff_ends and ends_at_cutoff(rec)
+
+    def _padding_s(self, rec: Recording) -> float:
+        return padding_s(rec, self.extend_fraction) if self.cutoff_ends else 0.0
 
     @property
     def names(self) -> list[str]:
@@ -246,8 +257,7 @@ class IdentificationProblem:
         results = []
         for rec, vals in zip(self.recordings, values, strict=True):
             params = self.params.with_values(vals)
-            req = request_for_recording(params, rec, initial_state="params",
-                                        extend_s=padding_s(rec, self.extend_fraction))
+            req = request_for_recording(params, rec, initial_state="params", extend_s=self._padding_s(rec))
             res = self.simulator.simulate(params, req)
             if res.time_s.size < 2:
                 raise SimulationError(f"{rec.source}: simulation ended immediately (cut-off at start)")
@@ -269,7 +279,7 @@ class IdentificationProblem:
         r2s, rmses = [], []
         for rec, res in zip(self.recordings, results, strict=True):
             t = rec.relative_time_s
-            r2s.append(r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v, ends_at_cutoff(rec)))
+            r2s.append(r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v, self._at_cutoff(rec)))
             rmses.append(1e3 * rmse_v(t, rec.voltage_v, res.time_s, res.pack_voltage_v))
         return CandidateScore(float(np.mean(r2s)), r2s, rmses, results, values)
 
