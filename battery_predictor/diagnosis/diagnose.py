@@ -390,7 +390,8 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
     budget : int
         Model evaluations of each observed-data fit (baseline and every candidate alike).
     reference_budget : int
-        Model evaluations of the reference fit.
+        Model evaluations of each identification of the reference fit (up to three,
+        :func:`~battery_predictor.diagnosis.reference.identify_reference`).
     fit_fraction : float
         Fraction of each observed recording (in time) used for fitting; the rest is held out.
     split : {"auto", "time", "recordings"}
