@@ -105,17 +105,69 @@ class Recording:
 
 #: A recording is taken to end at its cut-off when its last voltage is within this fraction of
 #: its voltage range above its minimum and the last current is a discharge (under a varying
-#: load the lowest voltage may fall on an earlier high-current step).
+#: load the lowest voltage may fall on an earlier high-current step) ...
 END_AT_MIN_FRACTION = 0.02
+#: ... and it ends on the knee of its discharge curve: over the last :data:`KNEE_CHARGE_FRACTION` of
+#: the charge it drew, its voltage corrected for the ohmic drop (:func:`end_steepness`) falls at least
+#: this many times faster than on average over the recording. A cut-off is where the open-circuit
+#: voltage turns steep near empty: the measured discharges that stop at their cut-off (LG M50,
+#: Panasonic drive cycles, K2 LFP, the Leaf pack, 1-2.75C) fall 2.9-13x faster there; a working day
+#: that stops on the plateau while a high load happens to give its lowest voltage falls about as fast
+#: as on average (0.1-1.5x, second generator; docs/findings.md).
+KNEE_STEEPNESS = 2.0
+#: Share of the recording's drawn charge over which the end's steepness is measured.
+KNEE_CHARGE_FRACTION = 0.03
+
+
+def ohmic_resistance_estimate(rec: Recording) -> float:
+    """The recording's ohmic resistance from its current steps (Ohm, >= 0; 0 when it has none).
+
+    The median of ``-dV / dI`` over consecutive samples whose current changes by at least 10 % of
+    the recording's current range (fewer than three such steps: 0, e.g. a constant-current discharge).
+    """
+    v = np.asarray(rec.voltage_v, dtype=float)
+    i = np.asarray(rec.current_a, dtype=float)
+    if i.size < 2:
+        return 0.0
+    dv, di = np.diff(v), np.diff(i)
+    steps = np.abs(di) >= 0.1 * max(float(np.ptp(i)), 1e-12)
+    if int(np.count_nonzero(steps)) < 3:
+        return 0.0
+    return max(float(np.median(-dv[steps] / di[steps])), 0.0)
+
+
+def end_steepness(rec: Recording, charge_fraction: float = KNEE_CHARGE_FRACTION) -> float:
+    """How much faster the recording's voltage falls at its end than on average, per charge drawn.
+
+    The voltage is corrected for the ohmic drop (``V + I R``, :func:`ohmic_resistance_estimate`) so
+    that a load step does not count as a fall. Returns the drop over the last ``charge_fraction`` of
+    the drawn charge divided by ``charge_fraction`` times the drop from the recording's highest
+    corrected voltage to its last one (1 = as steep as on average; 0 when nothing was drawn or the
+    voltage did not fall).
+    """
+    t = np.asarray(rec.time_s, dtype=float)
+    i = np.asarray(rec.current_a, dtype=float)
+    if t.size < 2:
+        return 0.0
+    u = np.asarray(rec.voltage_v, dtype=float) + i * ohmic_resistance_estimate(rec)
+    dis = np.maximum(i, 0.0)
+    q = np.concatenate([[0.0], np.cumsum(0.5 * (dis[1:] + dis[:-1]) * np.diff(t))])
+    span = float(np.max(u) - u[-1])
+    if q[-1] <= 0.0 or span <= 0.0:
+        return 0.0
+    k = int(np.searchsorted(q, q[-1] * (1.0 - charge_fraction)))
+    before = float(np.median(u[max(k - 2, 0):k + 3]))  # a few samples: the noise
+    return (before - float(u[-1])) / (charge_fraction * span)
 
 
 def ends_at_cutoff(rec: Recording) -> bool:
-    """True when the recording ends at its minimum voltage while discharging (its runtime is defined).
+    """True when the recording ends at its minimum voltage while discharging, on the knee (its runtime is defined).
 
     Only such a recording says what the cell would have done after its end (it stopped at its
     cut-off): the seed paper's R2_mod padding (Eq. 2, the measured voltage continued at its minimum)
     and a simulation run past the end apply to it. A working day that stops at 40 % SOC, or ends
-    in a rest or a recharge, says nothing about later voltages.
+    in a rest or a recharge, says nothing about later voltages; nor does one that stops on the
+    plateau during a high load, whose last voltage is then its lowest (:data:`KNEE_STEEPNESS`).
 
     Parameters
     ----------
@@ -124,4 +176,5 @@ def ends_at_cutoff(rec: Recording) -> bool:
     """
     v = np.asarray(rec.voltage_v, dtype=float)
     span = float(v.max() - v.min())
-    return bool(span > 0 and v[-1] - v.min() <= END_AT_MIN_FRACTION * span and rec.current_a[-1] > 0)
+    at_min = bool(span > 0 and v[-1] - v.min() <= END_AT_MIN_FRACTION * span and rec.current_a[-1] > 0)
+    return at_min and end_steepness(rec) >= KNEE_STEEPNESS

@@ -38,8 +38,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--budget", type=int, default=None,
                    help="model evaluations of each observed-data fit, baseline and candidates alike (default 80)")
     p.add_argument("--reference-budget", type=int, default=None,
-                   help="model evaluations of the reference identification ('fit --method identify' on the SPM "
-                        "engine; default 1000)")
+                   help="model evaluations of each reference identification ('fit --method identify' on the SPM "
+                        "engine; default 1000; up to three run: without the end padding and with the particle "
+                        "diffusivities as well)")
     p.add_argument("--fit-fraction", type=float, default=0.6,
                    help="fraction of each observed recording's discharge throughput (Ah, rests, soaks and recharges not "
                         "counted) in its fit part; the rest is held out (default 0.6)")

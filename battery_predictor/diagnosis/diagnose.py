@@ -411,7 +411,8 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
     budget : int
         Model evaluations of each observed-data fit (baseline and every candidate alike).
     reference_budget : int
-        Model evaluations of the reference fit.
+        Model evaluations of each identification of the reference fit (up to three,
+        :func:`~battery_predictor.diagnosis.reference.identify_reference`).
     fit_fraction : float
         Fraction of each observed recording (in time) used for fitting; the rest is held out.
     split : {"auto", "time", "recordings"}
@@ -437,7 +438,8 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
     refs: list[Observed] = []
     if references:
         refs = [observe(r, params, fit_fraction=0.95, name=str(r.source)) for r in references]
-        params, reference = identify_reference(params, references, reference_budget, seed, progress)
+        params, reference = identify_reference(params, references, reference_budget, seed, progress,
+                                               noise_mv=1e3 * noise_level_v(refs))
         params = with_reference_anchor(params, refs)
     obs = [observe(r, params, fit_fraction=fit_fraction, name=str(r.source)) for r in observed]
     if reference is not None:

@@ -21,13 +21,18 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.params import PackParams, cached_parameter_values
-from battery_predictor.recording import Recording
+from battery_predictor.recording import Recording, ends_at_cutoff
+
+if TYPE_CHECKING:
+    from battery_predictor.fitting.identification import CandidateScore, IdentificationProblem, IdentificationResult
+    from battery_predictor.simulation.base import PackSimulator
 
 #: Default evaluation budget of the reference identification on the SPM engine (the ``fit --method
 #: identify`` default: the Panasonic 25 degC fit at 1000 evaluations takes ~24 s on the engine).
@@ -46,6 +51,11 @@ FALLBACK_BUDGET = 150
 #: another chemistry's OCPs (docs/identification.md). Only the excess over the noise counts (white
 #: noise no model can fit, :func:`~battery_predictor.diagnosis.decision.excess_mv`).
 POOR_EXCESS_MV_PER_CELL = 40.0
+#: The particle diffusivities, searched in a second identification that starts from the first one's
+#: result (:func:`identify_reference`). On a flat open-circuit voltage (LFP) the end of a working day
+#: is shaped by solid diffusion: a far-truth Ranger reference day (diffusivities x0.5-2 of the
+#: params') was fitted to 71.8 mV without them and 9.9 mV with them (docs/findings.md).
+TRANSPORT_COORDINATES = ("negative_diffusivity_m2_s", "positive_diffusivity_m2_s")
 
 
 @dataclass
@@ -76,6 +86,10 @@ class ReferenceFit:
         ``engine`` or the fallback's name.
     series : int
         Cells in series (for per-cell figures).
+    extra : list of str
+        Optional coordinates searched as well (:data:`TRANSPORT_COORDINATES` when they were kept).
+    end_padding : bool
+        Whether references ending at their minimum voltage were padded as stopped at their cut-off.
     """
 
     values: dict[str, float]
@@ -90,6 +104,8 @@ class ReferenceFit:
     r2_mod_per_recording: list[float] = field(default_factory=list)
     simulator: str = "engine"
     series: int = 1
+    extra: list[str] = field(default_factory=list)
+    end_padding: bool = False
 
     @property
     def rmse_mV_per_cell(self) -> float:
@@ -101,7 +117,8 @@ class ReferenceFit:
                 "r2_mod_per_recording": list(self.r2_mod_per_recording),
                 "evaluations": self.evaluations, "values": dict(self.values), "initial_soc": list(self.socs),
                 "not_fitted": list(self.skipped), "seconds": self.seconds, "simulator": self.simulator,
-                "method": "identify"}
+                "method": "identify", "extra_coordinates": list(self.extra),
+                "end_padding": self.end_padding}
 
 
 def _rms(values: Sequence[float]) -> float:
@@ -110,9 +127,19 @@ def _rms(values: Sequence[float]) -> float:
 
 
 def identify_reference(params: PackParams, references: Sequence[Recording], budget: int = DEFAULT_IDENTIFY_BUDGET,
-                       seed: int = 0, progress: Callable[[str], None] | None = None
+                       seed: int = 0, progress: Callable[[str], None] | None = None, noise_mv: float = 0.0
                        ) -> tuple[PackParams, ReferenceFit]:
     """Identify ``params`` on the reference recordings (``fit --method identify`` on the SPM engine).
+
+    On the engine, a second identification then also searches the particle diffusivities
+    (:data:`TRANSPORT_COORDINATES`, where the params give them as scalars), starting from the first
+    one's result with the same budget; it is kept only when it fits the references separably better
+    (:func:`separably_better`), the rule by which the decision prefers the simpler of two candidates.
+    When a reference ends at its minimum voltage while discharging
+    (:func:`~battery_predictor.recording.ends_at_cutoff`), the seed paper's end padding asks the
+    model to be empty there; an identification without it runs too, and the padding is dropped when
+    that one fits the references separably better (the reference did not stop at its cut-off: an
+    LFP working day that ends on the onset of its knee fitted to 207.5 mV padded, 9.3 mV without).
 
     Parameters
     ----------
@@ -125,6 +152,8 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
         cover, at most :data:`FALLBACK_BUDGET`.
     seed : int
         TPE seed.
+    noise_mv : float
+        Voltage noise of the references (mV; :func:`~battery_predictor.diagnosis.scoring.noise_level_v`).
 
     Returns
     -------
@@ -166,17 +195,100 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
 
     result = identify(problem, evaluations=max(int(budget), 2), seed=seed, progress=show)
     best = problem.score(result.coordinates)
+    evaluations = result.evaluations
+    cutoff_ends = any(ends_at_cutoff(r) for r in references)
+    if cutoff_ends and name == "engine":
+        # the end padding assumes the recording stopped at its cut-off; the data test it
+        free = IdentificationProblem(params=params, recordings=list(references), simulator=simulator, space=space,
+                                     cutoff_ends=False)
+        f_result = identify(free, evaluations=max(int(budget), 2), seed=seed,
+                            progress=lambda phase, n, cost: show(f"without the end padding, {phase}", n, cost))
+        f_best = free.score(f_result.coordinates)
+        evaluations += f_result.evaluations
+        padded_mv, free_mv = _rms(best.rmse_mv), _rms(f_best.rmse_mv)
+        cutoff_ends = not separably_better(padded_mv, free_mv, noise_mv)
+        _log(progress, f"reference fit without the end padding (the references ending at their minimum voltage "
+                       f"taken as not stopped at their cut-off): RMSE {free_mv:.1f} mV (padded {padded_mv:.1f} mV): "
+                       f"{'padding kept' if cutoff_ends else 'separably better: the references did not stop at their cut-off'}")
+        if not cutoff_ends:
+            problem, result, best = free, f_result, f_best
+    extra: list[str] = []
+    if name == "engine":
+        transport = _transport_fit(params, references, simulator, result.coordinates, budget, seed, show,
+                                   cutoff_ends=problem.cutoff_ends)
+        if transport is not None:
+            t_problem, t_result, t_best = transport
+            evaluations += t_result.evaluations
+            basic_mv, t_mv = _rms(best.rmse_mv), _rms(t_best.rmse_mv)
+            kept = separably_better(basic_mv, t_mv, noise_mv)
+            _log(progress, f"reference fit with the particle diffusivities: RMSE {t_mv:.1f} mV (without {basic_mv:.1f} "
+                           f"mV): {'kept' if kept else 'not separably better, not kept'}")
+            if kept:
+                problem, space, result, best = t_problem, t_problem.space, t_result, t_best
+                extra = list(TRANSPORT_COORDINATES)
     fitted = reachable_soc_window(params.with_values(best.values[0]), progress)
     states = [result.coordinates[c.name] for c in space if c.recording is not None]
     info = ReferenceFit(values={k: float(v) for k, v in result.coordinates.items() if not k.startswith("initial_ocv")},
                         socs=[float(s) for s in states], rmse_mV=_rms(best.rmse_mv), initial_rmse_mV=initial_rmse,
-                        evaluations=result.evaluations, skipped=[], seconds=time.perf_counter() - tic,
+                        evaluations=evaluations, skipped=[], seconds=time.perf_counter() - tic,
                         r2_mod=float(best.r2_mod), rmse_mV_per_recording=[float(x) for x in best.rmse_mv],
                         r2_mod_per_recording=[float(x) for x in best.per_recording], simulator=name,
-                        series=params.series)
+                        series=params.series, extra=extra,
+                        end_padding=problem.cutoff_ends and any(ends_at_cutoff(r) for r in references))
     _log(progress, f"reference fit: RMSE {initial_rmse:.1f} -> {info.rmse_mV:.1f} mV, R2_mod {info.r2_mod:.4f} "
                    f"({info.evaluations} evaluations, {info.seconds:.0f} s)")
     return fitted, info
+
+
+def separably_better(basic_rmse_mv: float, transport_rmse_mv: float, noise_mv: float) -> bool:
+    """Whether a fit with RMSE ``transport_rmse_mv`` is separably better than the ``basic`` one (mV).
+
+    The decision's separability rule (:func:`~battery_predictor.diagnosis.decision.near_lowest`): the
+    basic fit (fewer searched values, or the seed paper's end padding) is kept unless its error above
+    the noise exceeds :data:`SEPARABILITY_FACTOR` times the other's plus :data:`NEAR_NOISE_FRACTION`
+    of the noise (a difference the noise cannot explain).
+    """
+    from battery_predictor.diagnosis.decision import NEAR_NOISE_FRACTION, SEPARABILITY_FACTOR, excess_mv
+
+    if not math.isfinite(transport_rmse_mv):
+        return False
+    if not math.isfinite(basic_rmse_mv):
+        return True
+    margin = SEPARABILITY_FACTOR * excess_mv(transport_rmse_mv, noise_mv) + NEAR_NOISE_FRACTION * noise_mv
+    return excess_mv(basic_rmse_mv, noise_mv) > margin
+
+
+def _transport_fit(params: PackParams, references: Sequence[Recording], simulator: PackSimulator,
+                   start: dict[str, float], budget: int, seed: int, show: Callable[[str, int, float], None],
+                   cutoff_ends: bool = True
+                   ) -> tuple[IdentificationProblem, IdentificationResult, CandidateScore] | None:
+    """The identification with :data:`TRANSPORT_COORDINATES` from ``start``: (problem, result, score), or None.
+
+    None when the params give a diffusivity as a function (not a scalar to search) or the fit fails.
+    """
+    import dataclasses
+    import warnings
+
+    from battery_predictor.errors import ParamsError
+    from battery_predictor.fitting.identifiable import default_space
+    from battery_predictor.fitting.identification import IdentificationProblem, identify
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            space = default_space(params, references, extra=TRANSPORT_COORDINATES)
+    except ParamsError:
+        return None
+    space = [dataclasses.replace(c, initial=min(max(float(start.get(c.name, c.initial)), c.low), c.high))
+             for c in space]
+    problem = IdentificationProblem(params=params, recordings=list(references), simulator=simulator, space=space,
+                                    cutoff_ends=cutoff_ends)
+    try:
+        result = identify(problem, evaluations=max(int(budget), 2), seed=seed,
+                          progress=lambda phase, n, cost: show(f"with diffusivities, {phase}", n, cost))
+        return problem, result, problem.score(result.coordinates)
+    except BatteryPredictorError:
+        return None
 
 
 def reachable_soc_window(params: PackParams, progress: Callable[[str], None] | None = None) -> PackParams:
@@ -248,8 +360,8 @@ def _log(progress: Callable[[str], None] | None, msg: str) -> None:
         progress(msg)
 
 
-__all__ = ["DEFAULT_IDENTIFY_BUDGET", "POOR_EXCESS_MV_PER_CELL", "ReferenceFit", "excess_per_cell_mv",
-           "identify_reference", "reference_verdict"]
+__all__ = ["DEFAULT_IDENTIFY_BUDGET", "POOR_EXCESS_MV_PER_CELL", "ReferenceFit", "TRANSPORT_COORDINATES",
+           "excess_per_cell_mv", "identify_reference", "reference_verdict", "separably_better"]
 
 
 def reference_anchor_k(temperature_traces_k: Sequence[npt.ArrayLike | None], currents_a: Sequence[npt.ArrayLike]

@@ -139,13 +139,15 @@ class ResidualGrid:
     signal: str = "pack"
 
     @classmethod
-    def for_recording(cls, rec: Recording, extend_s: float, n_recordings: int) -> ResidualGrid:
-        """The grid of ``rec`` with ``extend_s`` seconds of padding."""
+    def for_recording(cls, rec: Recording, extend_s: float, n_recordings: int,
+                      at_cutoff: bool | None = None) -> ResidualGrid:
+        """The grid of ``rec`` with ``extend_s`` seconds of padding (``at_cutoff``: default :func:`ends_at_cutoff`)."""
         return cls._padded(rec.relative_time_s, np.asarray(rec.voltage_v, dtype=float), extend_s, n_recordings,
-                           ends_at_cutoff(rec), "pack")
+                           ends_at_cutoff(rec) if at_cutoff is None else at_cutoff, "pack")
 
     @classmethod
-    def for_weakest_group(cls, rec: Recording, extend_s: float, n_recordings: int) -> ResidualGrid | None:
+    def for_weakest_group(cls, rec: Recording, extend_s: float, n_recordings: int,
+                          at_cutoff: bool | None = None) -> ResidualGrid | None:
         """The grid of ``rec``'s lowest measured group voltage (V, the samples where any group was measured),
         padded like :meth:`for_recording`; None when the recording has no group voltages.
 
@@ -162,7 +164,7 @@ class ResidualGrid:
         if measured.sum() < 2:
             return None
         return cls._padded(rec.relative_time_s[measured], u_all[measured], extend_s, n_recordings,
-                           ends_at_cutoff(rec), "min_cell")
+                           ends_at_cutoff(rec) if at_cutoff is None else at_cutoff, "min_cell")
 
     @classmethod
     def _padded(cls, t: np.ndarray, u: np.ndarray, extend_s: float, n_recordings: int, at_cutoff: bool,
@@ -242,6 +244,9 @@ class IdentificationProblem:
     group_voltages : bool
         Fit the weakest measured group voltage too when the params use ``cell_imbalance`` (below);
         False: the pack voltage only.
+    cutoff_ends : bool
+        False: no recording is taken to end at its cut-off (none is padded, clipped or truncated),
+        whatever :func:`~battery_predictor.recording.ends_at_cutoff` says.
 
     With the extension ``cell_imbalance``, a recording that carries its series groups' voltages
     adds a second residual block: its lowest group voltage against the model's lowest cell
@@ -258,6 +263,7 @@ class IdentificationProblem:
     space: list[Coordinate]
     extend_fraction: float = 0.2
     group_voltages: bool = True
+    cutoff_ends: bool = True
 
     def __post_init__(self) -> None:
         # every candidate narrows a cold window towards the start's anchors: the same coordinates give the
@@ -265,13 +271,19 @@ class IdentificationProblem:
         self.params = with_cold_window_anchors(self.params)
         n = len(self.recordings)
         self._basis = electrode_basis(self.params)
-        self._grids = [ResidualGrid.for_recording(r, padding_s(r, self.extend_fraction), n) for r in self.recordings]
+        self._grids = [ResidualGrid.for_recording(r, self._padding_s(r), n, self._at_cutoff(r)) for r in self.recordings]
         self._group_grids: list[tuple[int, ResidualGrid]] = []
         if self.group_voltages and "cell_imbalance" in self.params.extensions:
             for k, r in enumerate(self.recordings):
-                grid = ResidualGrid.for_weakest_group(r, padding_s(r, self.extend_fraction), n)
+                grid = ResidualGrid.for_weakest_group(r, self._padding_s(r), n, self._at_cutoff(r))
                 if grid is not None:
                     self._group_grids.append((k, grid))
+
+    def _at_cutoff(self, rec: Recording) -> bool:
+        return self.cutoff_ends and ends_at_cutoff(rec)
+
+    def _padding_s(self, rec: Recording) -> float:
+        return padding_s(rec, self.extend_fraction) if self.cutoff_ends else 0.0
 
     @property
     def fits_weakest_group(self) -> bool:
@@ -304,7 +316,7 @@ class IdentificationProblem:
         for rec, vals in zip(self.recordings, values, strict=True):
             params = self.params.with_values(vals)
             req = request_for_recording(params, rec, initial_state="params",
-                                        extend_s=padding_s(rec, self.extend_fraction))
+                                        extend_s=self._padding_s(rec))
             res = self.simulator.simulate(params, req)
             if res.time_s.size < 2:
                 raise SimulationError(f"{rec.source}: simulation ended immediately (cut-off at start)")
@@ -327,7 +339,7 @@ class IdentificationProblem:
         r2s, rmses = [], []
         for rec, res in zip(self.recordings, results, strict=True):
             t = rec.relative_time_s
-            r2s.append(r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v, ends_at_cutoff(rec)))
+            r2s.append(r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v, self._at_cutoff(rec)))
             rmses.append(1e3 * rmse_v(t, rec.voltage_v, res.time_s, res.pack_voltage_v))
         return CandidateScore(float(np.mean(r2s)), r2s, rmses, results, values)
 

@@ -130,16 +130,19 @@ def test_capacity_fade_state_keeps_pybamm_soc_meaning(temi):
 def test_ends_at_cutoff_and_tail(temi, temi_run):
     _, res = temi_run
     assert not ends_at_cutoff(_recording(res))  # 1.5 h from 80 %: still far from the cut-off
-    v = np.linspace(4.0, 3.0, 50)
+    x = np.linspace(0.0, 1.0, 50)
+    v = 4.0 - 0.5 * x - 0.5 * x ** 12  # a discharge that ends on its knee
     rec = Recording(np.arange(50.0), v, np.full(50, 2.0), None)
     assert ends_at_cutoff(rec)
+    assert not ends_at_cutoff(Recording(np.arange(50.0), np.linspace(4.0, 3.0, 50), np.full(50, 2.0), None))
     obs = observe(rec, temi)
     assert obs.load.end_s > 50.0 and obs.load.current_a[-1] == pytest.approx(2.0)
 
 
 def test_held_out_score_pads_an_early_end():
     t = np.arange(100.0)
-    v = np.linspace(4.0, 3.0, 100)
+    x = np.linspace(0.0, 1.0, 100)
+    v = 4.0 - 0.5 * x - 0.5 * x ** 12  # ends on its knee: at its cut-off
     rec = Recording(t, v, np.ones(100), None)
     obs = observe(rec, load_params(PARAMS / "lgm50.yaml"), fit_fraction=0.5)
     from battery_predictor.diagnosis.engine import SimOut

@@ -343,17 +343,32 @@ def test_identifiability_of_a_parameter_the_data_do_not_touch_is_unbounded_not_a
 
 def test_only_a_recording_that_ends_at_its_cutoff_is_padded():
     t = np.arange(0.0, 600.0, 10.0)
-    falling = Recording(t, np.linspace(4.1, 3.0, t.size), np.full(t.size, 2.0))  # discharged to its minimum
+    falling = Recording(t, _knee_discharge(t.size), np.full(t.size, 2.0))  # discharged to its minimum, on the knee
     assert padding_s(falling, 0.2) == pytest.approx(0.2 * falling.duration_s)
-    resting = Recording(t, np.where(t < 500.0, np.linspace(4.1, 3.0, t.size), 3.3), np.where(t < 500.0, 2.0, 0.0))
+    resting = Recording(t, np.where(t < 500.0, _knee_discharge(t.size), 3.3), np.where(t < 500.0, 2.0, 0.0))
     assert padding_s(resting, 0.2) == 0.0
-    stopped_high = Recording(t, np.linspace(4.1, 3.0, t.size)[::-1], np.full(t.size, 2.0))  # last voltage its maximum
+    stopped_high = Recording(t, _knee_discharge(t.size)[::-1], np.full(t.size, 2.0))  # last voltage its maximum
+    # a working day that stops on the plateau during a high load (its lowest voltage, but not its cut-off)
+    current = np.where((t // 60.0) % 2 == 1, 4.0, 1.0)  # 1 A and 4 A alternating, the last minute at 4 A
+    charge = np.concatenate([[0.0], np.cumsum(current[:-1] * np.diff(t))])
+    plateau = Recording(t, 4.1 - 0.4 * charge / charge[-1] - 0.05 * current, current)
+    assert plateau.voltage_v[-1] == plateau.voltage_v.min()
+    assert padding_s(plateau, 0.2) == 0.0
+    # the same day ending on the knee is at its cut-off
+    knee = Recording(t, plateau.voltage_v - 0.5 * (charge / charge[-1]) ** 30, current)
+    assert padding_s(knee, 0.2) == pytest.approx(0.2 * knee.duration_s)
     assert padding_s(stopped_high, 0.2) == 0.0
+
+
+def _knee_discharge(n: int) -> np.ndarray:
+    """A constant-current discharge from 4.1 V to its cut-off at 3.0 V that ends on the knee."""
+    x = np.linspace(0.0, 1.0, n)
+    return 4.1 - 0.6 * x - 0.5 * x ** 12
 
 
 def test_a_dip_below_the_minimum_counts_unless_the_recording_ended_at_its_cutoff():
     t = np.arange(0.0, 600.0, 10.0)
-    v = np.linspace(4.1, 3.0, t.size)
+    v = _knee_discharge(t.size)
     dip = v.copy()
     dip[30] = 2.9  # a load peak of the model below the recording's minimum (3.0 V)
     sim = PackSimResult(t, dip, np.full(t.size, 2.0), dip, "end_of_load", float(t[-1]))
