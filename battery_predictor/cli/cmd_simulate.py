@@ -83,6 +83,7 @@ def _score(params: PackParams, recs: Sequence[Recording], sim: PackSimulator,
 
     from battery_predictor.fitting.cost import r2_mod, rmse_v
     from battery_predictor.fitting.problem import loaded_start_ocv_v, request_for_recording, starts_at_rest
+    from battery_predictor.recording import ends_at_cutoff
 
     rows: list[dict[str, Any]] = []
     results: list[PackSimResult] = []
@@ -99,7 +100,8 @@ def _score(params: PackParams, recs: Sequence[Recording], sim: PackSimulator,
             t_sim = res.end_time_s
         rows.append({
             "data": str(rec.source),
-            "r2_mod": r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v),
+            # as the fit scores it: Eq. 1-2's end handling only for a recording that ends at its cut-off
+            "r2_mod": r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v, ends_at_cutoff(rec)),
             "rmse_mV": 1e3 * rmse_v(t, rec.voltage_v, res.time_s, res.pack_voltage_v),
             "runtime_s_measured": float(rec.duration_s),
             "runtime_s_simulated": t_sim,
