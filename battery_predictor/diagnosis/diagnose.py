@@ -1,8 +1,9 @@
 """The diagnosis procedure: what the baseline gets wrong, which cause explains it, how much it gains.
 
-1. **Baseline.** The params' SPM pack model, fitted on the reference recordings (bounded
-   least squares over the params' ``fit.parameters`` that a built model can vary without a
-   rebuild, see :func:`fit_reference`), or taken as it is when there is no reference.
+1. **Baseline.** The params' SPM pack model, fitted on the reference recordings by the project's
+   identification (:func:`~battery_predictor.diagnosis.reference.identify_reference`), or taken as
+   it is when there is no reference. Every run is simulated on the SPM engine where it covers the
+   run, else by PyBaMM's solver (:class:`~battery_predictor.diagnosis.engine.Engine`).
 2. **Split.** Each observed recording is split in time: the first ``fit_fraction`` (60 %) is
    the fit part, the rest (40 %) is held out. With one observed recording every fit sees the
    fit part and is judged on the held-out part (``split="time"``). With two or more observed
