@@ -326,19 +326,18 @@ _HYSTERESIS_INPUTS = {ext.HYS_HALF_WIDTH: ext.HYS_HALF_WIDTH, ext.PYBAMM_HYS_INI
                       **{k: ext.HYS_DECAY for k in ext.PYBAMM_HYS_DECAY_KEYS}}
 
 
-def engine_params(params: PackParams, obs: Observed, values: dict, concentrations: tuple[float, float],
-                  post: Post) -> PackParams:
+def engine_params(params: PackParams, values: dict, concentrations: tuple[float, float], post: Post,
+                  cutoff_v: float) -> PackParams:
     """The params a run of :meth:`Engine.simulate` means, for the SPM engine.
 
     The run's values (volume fractions; the hysteresis inputs as the extension's values), its initial
-    concentrations (mol/m3), its cut-off (:func:`model_cutoff_v`) and a weak series group
+    concentrations (mol/m3), its cell cut-off ``cutoff_v`` (V, :func:`model_cutoff_v`) and a weak series group
     (``post.weak_fraction``, as the extension ``cell_imbalance``). The contact resistance stays a
     post-solve term (:func:`finish_run`).
     """
-    pv = cached_parameter_values(params)
     updates = {k: float(v) for k, v in values.items() if k in _ENGINE_VALUE_KEYS}
     updates[C_N0], updates[C_P0] = (float(c) for c in concentrations)
-    updates["Lower voltage cut-off [V]"] = model_cutoff_v(float(pv["Lower voltage cut-off [V]"]), obs, params.series)
+    updates["Lower voltage cut-off [V]"] = float(cutoff_v)
     extra = dict(params.extra)
     extensions = list(params.extensions)
     for key, extra_key in _HYSTERESIS_INPUTS.items():
@@ -665,29 +664,30 @@ class Engine:
         reason counted in :attr:`pybamm_reasons`, when the run needs PyBaMM's solver.
         """
         reason = self.engine_reason(values, extra_inputs, post, temperature_trace)
-        spm_params = None
+        if reason is not None:
+            self.pybamm_reasons[reason] += 1
+            return None
+        cutoff_v = model_cutoff_v(float(cached_parameter_values(params)["Lower voltage cut-off [V]"]), obs,
+                                  params.series)
+        spm_params = engine_params(params, values, concentrations, post, cutoff_v)
         t_stop = float(obs.load.end_s) if t_end is None else min(float(t_end) + 3 * _EDGE_S, float(obs.load.end_s))
         request = SimulationRequest(load=obs.load.truncate(t_stop).shift_current(-offset_a),
                                     ambient_temperature_k=float(ambient_k), output_time_s=report_times(obs, t_end))
-        if reason is None:
-            spm_params = engine_params(params, obs, values, concentrations, post)
-            reason = EngineSimulator.unsupported_reason(spm_params, request)
-        if reason is None:
-            assert self._spm is not None and spm_params is not None  # engine_reason and the line above
-            try:
-                res = self._spm.simulate(spm_params, request)
-            except SimulationError as exc:
-                reason = f"engine: {exc}"
+        reason = EngineSimulator.unsupported_reason(spm_params, request)
         if reason is not None:
             self.pybamm_reasons[reason] += 1
+            return None
+        assert self._spm is not None  # engine_reason says so
+        try:
+            res = self._spm.simulate(spm_params, request)
+        except SimulationError as exc:
+            self.pybamm_reasons[f"engine: {exc}"] += 1
             return None
         self.engine_runs += 1
         v_cells = list(np.asarray(res.extra["group_cell_voltage_v"], dtype=float))
         temp = None
         if want_temperature:
             temp = np.asarray(res.extra.get("cell_temperature_k", np.full(res.time_s.size, float(ambient_k))))
-        cutoff_v = model_cutoff_v(float(cached_parameter_values(params)["Lower voltage cut-off [V]"]), obs,
-                                  params.series)
         return finish_run(params, obs, res.time_s, v_cells, temp, reached=res.reached_cutoff,
                           end_time_s=res.end_time_s, r_eq=self._r_eq(params, values), post=post, offset_a=offset_a,
                           cutoff_v=cutoff_v)

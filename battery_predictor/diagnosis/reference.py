@@ -31,6 +31,7 @@ from battery_predictor.params import PackParams, cached_parameter_values
 from battery_predictor.recording import Recording, ends_at_cutoff
 
 if TYPE_CHECKING:
+    from battery_predictor.fitting.identifiable import Coordinate
     from battery_predictor.fitting.identification import CandidateScore, IdentificationProblem, IdentificationResult
     from battery_predictor.simulation.base import PackSimulator
 
@@ -199,11 +200,8 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
     cutoff_ends = any(ends_at_cutoff(r) for r in references)
     if cutoff_ends and name == "engine":
         # the end padding assumes the recording stopped at its cut-off; the data test it
-        free = IdentificationProblem(params=params, recordings=list(references), simulator=simulator, space=space,
-                                     cutoff_ends=False)
-        f_result = identify(free, evaluations=max(int(budget), 2), seed=seed,
-                            progress=lambda phase, n, cost: show(f"without the end padding, {phase}", n, cost))
-        f_best = free.score(f_result.coordinates)
+        free, f_result, f_best = _identify(params, references, simulator, space, budget, seed, show,
+                                           "without the end padding", cutoff_ends=False)
         evaluations += f_result.evaluations
         padded_mv, free_mv = _rms(best.rmse_mv), _rms(f_best.rmse_mv)
         cutoff_ends = not separably_better(padded_mv, free_mv, noise_mv)
@@ -240,8 +238,8 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
     return fitted, info
 
 
-def separably_better(basic_rmse_mv: float, transport_rmse_mv: float, noise_mv: float) -> bool:
-    """Whether a fit with RMSE ``transport_rmse_mv`` is separably better than the ``basic`` one (mV).
+def separably_better(basic_rmse_mv: float, other_rmse_mv: float, noise_mv: float) -> bool:
+    """Whether a fit with RMSE ``other_rmse_mv`` is separably better than the ``basic`` one (mV).
 
     The decision's separability rule (:func:`~battery_predictor.diagnosis.decision.near_lowest`): the
     basic fit (fewer searched values, or the seed paper's end padding) is kept unless its error above
@@ -250,11 +248,11 @@ def separably_better(basic_rmse_mv: float, transport_rmse_mv: float, noise_mv: f
     """
     from battery_predictor.diagnosis.decision import NEAR_NOISE_FRACTION, SEPARABILITY_FACTOR, excess_mv
 
-    if not math.isfinite(transport_rmse_mv):
+    if not math.isfinite(other_rmse_mv):
         return False
     if not math.isfinite(basic_rmse_mv):
         return True
-    margin = SEPARABILITY_FACTOR * excess_mv(transport_rmse_mv, noise_mv) + NEAR_NOISE_FRACTION * noise_mv
+    margin = SEPARABILITY_FACTOR * excess_mv(other_rmse_mv, noise_mv) + NEAR_NOISE_FRACTION * noise_mv
     return excess_mv(basic_rmse_mv, noise_mv) > margin
 
 
@@ -271,7 +269,6 @@ def _transport_fit(params: PackParams, references: Sequence[Recording], simulato
 
     from battery_predictor.errors import ParamsError
     from battery_predictor.fitting.identifiable import default_space
-    from battery_predictor.fitting.identification import IdentificationProblem, identify
 
     try:
         with warnings.catch_warnings():
@@ -281,14 +278,25 @@ def _transport_fit(params: PackParams, references: Sequence[Recording], simulato
         return None
     space = [dataclasses.replace(c, initial=min(max(float(start.get(c.name, c.initial)), c.low), c.high))
              for c in space]
-    problem = IdentificationProblem(params=params, recordings=list(references), simulator=simulator, space=space,
-                                    cutoff_ends=cutoff_ends)
     try:
-        result = identify(problem, evaluations=max(int(budget), 2), seed=seed,
-                          progress=lambda phase, n, cost: show(f"with diffusivities, {phase}", n, cost))
-        return problem, result, problem.score(result.coordinates)
+        return _identify(params, references, simulator, space, budget, seed, show, "with diffusivities",
+                         cutoff_ends=cutoff_ends)
     except BatteryPredictorError:
         return None
+
+
+def _identify(params: PackParams, references: Sequence[Recording], simulator: PackSimulator, space: list[Coordinate],
+              budget: int, seed: int, show: Callable[[str, int, float], None], label: str, *, cutoff_ends: bool
+              ) -> tuple[IdentificationProblem, IdentificationResult, CandidateScore]:
+    """One more identification of the references over ``space`` (its progress phases prefixed ``label``):
+    (problem, result, score of the result)."""
+    from battery_predictor.fitting.identification import IdentificationProblem, identify
+
+    problem = IdentificationProblem(params=params, recordings=list(references), simulator=simulator, space=space,
+                                    cutoff_ends=cutoff_ends)
+    result = identify(problem, evaluations=max(int(budget), 2), seed=seed,
+                      progress=lambda phase, n, cost: show(f"{label}, {phase}", n, cost))
+    return problem, result, problem.score(result.coordinates)
 
 
 def reachable_soc_window(params: PackParams, progress: Callable[[str], None] | None = None) -> PackParams:
