@@ -89,6 +89,7 @@ def run_identify(args: argparse.Namespace) -> int:
         print_json({"method": "identify", "r2_mod": best.r2_mod, "r2_mod_per_file": best.per_recording,
                     "rmse_mv_per_file": best.rmse_mv, "evaluations": result.evaluations,
                     "tpe_evaluations": result.tpe_evaluations, "seconds": result.seconds,
+                    "model_seconds": result.model_seconds, "optimiser_seconds": result.optimiser_seconds,
                     "coordinates": result.coordinates, "params": best.values[0],
                     "fitted_weakest_group_voltage": problem.fits_weakest_group,
                     "identifiability": report.to_dict(), "ocp": ocp_origin(params), "thermal": thermal,
@@ -97,7 +98,8 @@ def run_identify(args: argparse.Namespace) -> int:
     if problem.fits_weakest_group:
         print("fitting the weakest measured group voltage too (cell_imbalance; --ignore-group-voltages: pack only)")
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
-          f"({result.evaluations} evaluations, {result.seconds:.0f} s; {ocp_origin(params)}; {thermal} cell)")
+          f"({result.evaluations} evaluations, {result.seconds:.0f} s: model {result.model_seconds:.1f} s, "
+          f"optimiser {result.optimiser_seconds:.1f} s; {ocp_origin(params)}; {thermal} cell)")
     for c in space:
         print(f"  {c.name:<34} {c.initial:>12.5g} -> {result.coordinates[c.name]:>12.5g}   "
               f"[{c.low:.4g}, {c.high:.4g}]{' log' if c.log else ''}")

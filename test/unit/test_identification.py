@@ -234,6 +234,8 @@ def test_identify_spends_at_most_its_budget_and_improves_on_a_far_start(panasoni
     assert result.evaluations <= 40
     assert result.cost < 0.5 * float(start @ start)
     assert [h[0] for h in result.history][0] == "tpe"
+    assert 0.0 < result.model_seconds <= result.seconds
+    assert result.optimiser_seconds == pytest.approx(result.seconds - result.model_seconds)
 
 
 def test_refinement_near_the_truth_converges_to_it_and_reports_the_positive_electrode_determined(panasonic):
@@ -410,3 +412,43 @@ def test_a_day_that_stops_above_its_cutoff_leaves_only_the_noise_at_the_truth(pa
     # the noise and the current sampled every 20 s (the true model misses the load's edges); the padding
     # would add the rest voltage's distance from the minimum over 20 % more samples (~50 mV here)
     assert math.sqrt(float(r @ r) / r.size) / weight <= 3.0 * noise
+
+
+def test_extra_refinements_keep_the_budget_including_the_scoring_of_every_end_point():
+    """A quick-converging problem leaves budget after the planned refinements; further distinct
+    candidates are refined, and each end point's scoring still counts within the budget."""
+    target = np.array([0.3, 0.7])
+
+    @dataclasses.dataclass
+    class Coordinate:
+        name: str
+        initial: float = 0.5
+
+    class Quadratic:
+        space = [Coordinate("a"), Coordinate("b")]
+        runs = 0
+
+        def unit(self, coordinates):
+            return np.array([coordinates["a"], coordinates["b"]])
+
+        def coordinates(self, unit):
+            return {"a": float(unit[0]), "b": float(unit[1])}
+
+        def residuals(self, coordinates):
+            Quadratic.runs += 1
+            return self.unit(coordinates) - target
+
+        def score(self, coordinates):
+            Quadratic.runs += 1
+            r = self.unit(coordinates) - target
+            return dataclasses.replace(SCORE, r2_mod=1.0 - float(r @ r))
+
+    problem = Quadratic()
+    extra = 0
+    for budget in range(20, 80, 3):
+        Quadratic.runs = 0
+        result = identify(problem, evaluations=budget, seed=0, starts=1)
+        extra += result.starts > 1
+        assert Quadratic.runs == result.evaluations <= budget
+        np.testing.assert_allclose(result.unit, target, atol=1e-4)
+    assert extra, "the quick problem must leave budget for further refinements"
