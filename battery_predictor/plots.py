@@ -6,11 +6,17 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+
+#: Relative 95 % half-widths are drawn up to this; wider ones (and infinite ones) end at it, marked.
+HALF_WIDTH_AXIS_MAX = 10.0
 
 
 def plot_voltage_fit(recordings: Sequence, results: Sequence, path: str | Path, *, title: str,
-                     labels: Sequence[str] | None = None) -> Path:
+                     labels: Sequence[str] | None = None,
+                     identifiability: tuple[Sequence[tuple[str, float, bool]], Sequence[tuple[str, str, float]]]
+                     | None = None) -> Path:
     """Measured vs simulated pack voltage over time, one panel per recording.
 
     Parameters
@@ -23,10 +29,17 @@ def plot_voltage_fit(recordings: Sequence, results: Sequence, path: str | Path, 
         PNG to write.
     title : str
         Figure title (carries R2_mod).
+    identifiability : tuple, optional
+        ``(rows, pairs)`` from the fit's identifiability report: ``rows`` of ``(name,
+        relative 95 % half-width, determined)`` and compensating ``pairs`` of ``(name_a, name_b,
+        correlation)``; drawn as a last panel.
     """
     n = len(recordings)
-    fig = Figure(figsize=(9, 3.2 * n))
-    axes = fig.subplots(n, 1, squeeze=False)
+    extra = 1 if identifiability is not None else 0
+    fig = Figure(figsize=(9, 3.2 * (n + extra)))
+    axes = fig.subplots(n + extra, 1, squeeze=False)
+    if identifiability is not None:
+        _identifiability_panel(axes[n, 0], *identifiability)
     for k, (rec, res) in enumerate(zip(recordings, results)):
         ax = axes[k, 0]
         ax.plot(rec.relative_time_s / 60.0, rec.voltage_v, color="black", lw=1.2, label="measured")
@@ -42,6 +55,26 @@ def plot_voltage_fit(recordings: Sequence, results: Sequence, path: str | Path, 
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     return path
+
+
+def _identifiability_panel(ax: Axes, rows: Sequence[tuple[str, float, bool]], pairs: Sequence[tuple[str, str, float]]) -> None:
+    """Bars of each fitted parameter's relative 95 % half-width, coloured by whether the data determine it."""
+    names = [r[0] for r in rows]
+    widths = [min(r[1], HALF_WIDTH_AXIS_MAX) if np.isfinite(r[1]) else HALF_WIDTH_AXIS_MAX for r in rows]
+    colours = ["tab:green" if r[2] else "tab:red" for r in rows]
+    y = np.arange(len(rows))
+    ax.barh(y, widths, color=colours)
+    ax.set_yticks(y, names, fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xscale("log")
+    ax.set_xlim(min([1e-4] + [0.5 * w for w in widths if w > 0]), HALF_WIDTH_AXIS_MAX * 1.5)
+    ax.set_xlabel("relative 95 % half-width (green: determined by the data, red: not)")
+    for k, r in enumerate(rows):
+        if not np.isfinite(r[1]) or r[1] > HALF_WIDTH_AXIS_MAX:
+            ax.text(HALF_WIDTH_AXIS_MAX, k, "  unbounded", va="center", fontsize=7)
+    text = "; ".join(f"{a} ~ {b} ({c:+.2f})" for a, b, c in pairs) or "none"
+    ax.set_title(f"identifiability at the optimum; compensating pairs: {text}", fontsize=8)
+    ax.grid(alpha=0.3, axis="x")
 
 
 def ocv_figure(soc: Sequence[float] | np.ndarray, measured_v: Sequence[float] | np.ndarray,

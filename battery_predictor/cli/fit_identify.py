@@ -84,7 +84,8 @@ def run_identify(args: argparse.Namespace) -> int:
                                 fit=params.fit)
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
-    plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")
+    plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}",
+                     identifiability=report.plot_rows())
     if args.json:
         print_json({"method": "identify", "r2_mod": best.r2_mod, "r2_mod_per_file": best.per_recording,
                     "rmse_mv_per_file": best.rmse_mv, "evaluations": result.evaluations,

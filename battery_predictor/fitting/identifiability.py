@@ -73,6 +73,19 @@ class IdentifiabilityReport:
             "residual_scale": self.sigma,
         }
 
+    def relative_half_widths(self) -> list[float]:
+        """Each parameter's 95 % half-interval relative to its value (inf when undetermined or at 0)."""
+        out = []
+        for v, lo, hi in zip(self.values, self.ci95_low, self.ci95_high, strict=True):
+            half = 0.5 * (hi - lo)
+            out.append(abs(half / v) if v != 0 and math.isfinite(half) else math.inf)
+        return out
+
+    def plot_rows(self) -> tuple[list[tuple[str, float, bool]], list[tuple[str, str, float]]]:
+        """``(rows, pairs)`` for :func:`battery_predictor.plots.plot_voltage_fit`'s identifiability panel."""
+        rows = list(zip(self.names, self.relative_half_widths(), self.determined, strict=True))
+        return rows, list(self.correlated_pairs)
+
     def summary_lines(self) -> list[str]:
         """Console summary (one line per parameter, then pairs and weak directions)."""
         lines = ["identifiability (Jacobian at the optimum, approximate 95 % intervals):"]
