@@ -22,10 +22,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from battery_predictor.nodes.client import Context
@@ -90,6 +91,16 @@ def _feasible_tasks(session: ReplaySession, at_min: float) -> list[str]:
     return lines
 
 
+def _route_outcome(r: Any) -> str:
+    """The planned route's predicted end, or that the pack does not finish it (its voltage is then NaN)."""
+    if not math.isfinite(r.predicted_voltage_v):
+        return (f"the pack does not finish it (a cell reaches its cut-off on the way), threshold "
+                f"{r.threshold_voltage_v:.2f} V")
+    return (f"{r.predicted_voltage_v:.2f} V at the standstill current after it, threshold {r.threshold_voltage_v:.2f} V, "
+            f"margin {r.margin_v:+.2f} V, probability above the threshold {r.probability_above_threshold:.3f} "
+            f"(accepted at risk {r.risk:.2f})")
+
+
 def _plan_route(session: ReplaySession) -> list[str]:
     """Ask /plan_route for DEMO_JOB; the lines to print."""
     from battery_predictor.nodes.client import PLANNED_ROUTE_KINDS, plan_route
@@ -99,9 +110,7 @@ def _plan_route(session: ReplaySession) -> list[str]:
              f"{DEMO_JOB['pickup']} to {DEMO_JOB['dropoff']}, then back to the charger:",
              f"   route {' -> '.join(r.nodes)} ({r.length_m:.0f} m, {len(r.sections)} sections, "
              f"{r.route_duration_s / 60:.1f} min, {r.route_charge_ah:.2f} Ah)",
-             f"   {'accept' if r.accepted else 'reject'}: {r.predicted_voltage_v:.2f} V at the standstill current "
-             f"after it, threshold {r.threshold_voltage_v:.2f} V, margin {r.margin_v:+.2f} V, probability above "
-             f"the threshold {r.probability_above_threshold:.3f} (accepted at risk {r.risk:.2f})"]
+             f"   {'accept' if r.accepted else 'reject'}: " + _route_outcome(r)]
     for a in r.alternatives:
         soc = f", charge to SOC >= {a.required_soc:.3f}" if a.required_soc == a.required_soc else ""
         lines.append(f"   alternative, {PLANNED_ROUTE_KINDS.get(a.kind, a.kind)}: {'feasible' if a.feasible else 'not feasible'}{soc}")
