@@ -15,6 +15,7 @@ from battery_predictor.prediction.core import STATUS_OK, PredictorConfig, Predic
 from battery_predictor.prediction.pack_model import pack_model
 from battery_predictor.prediction.runtime import predict_remaining_runtime
 from battery_predictor.prediction.temperature import AmbientEstimate, temperature_ahead
+from battery_predictor.profiles.ranger import RouteSection
 from battery_predictor.simulation.engine.segments import EngineState
 from battery_predictor.simulation.extensions import EA_SERIES
 
@@ -183,3 +184,24 @@ def test_a_charging_session_restarts_the_ambient_estimate(cold_cell, cold_discha
     for k in range(70):  # 350 s of charging at 5 degC: a session
         core.update_state(305.0 + 5.0 * k, 4.0, -5.0, COLD_K + 5.0)
     assert core.temperature_ahead(COLD_K + 5.0).ambient_k == pytest.approx(COLD_K + 5.0)
+
+
+def test_routes_keep_their_own_state_whatever_the_forecast_did(cold_cell, cold_discharge):
+    """A self-heating forecast never makes a route warmer (more permissive): routes do not see its state."""
+    samples, _ = cold_discharge
+    thermal = replace(cold_cell, options={"thermal": "lumped"})
+    route = [RouteSection("a", 300.0, "flat", 0.0), RouteSection("b", 75.0, "uphill", 80.0)]
+    config = dict(route_min_voltage_v=3.0, standstill_current_a=1.0)
+    forecasting, routing = _fed_core(thermal, samples, **config), _fed_core(thermal, samples, **config)
+    for core in (forecasting, routing):
+        core.precalibrate()
+    assert forecasting.remaining_runtime(300.0).status == STATUS_OK
+    after_forecast, alone = forecasting.can_accept_route(route, 300.0), routing.can_accept_route(route, 300.0)
+    assert math.isfinite(alone.predicted_voltage_v)
+    assert after_forecast.predicted_voltage_v == alone.predicted_voltage_v
+    assert after_forecast.accepted == alone.accepted and after_forecast.state_of_charge == alone.state_of_charge
+    # and the route's state is the one at the measured temperature (as before), not the forecast's thermal one
+    route_cal = forecasting.calibration(samples[-1][3])
+    heating_cal = forecasting.calibration(samples[-1][3], forecasting.temperature_ahead(samples[-1][3]))
+    assert route_cal is not heating_cal and abs(route_cal.soc - heating_cal.soc) > 1e-4
+    assert 0.0 < route_cal.soc < 1.0 and alone.state_of_charge == pytest.approx(route_cal.soc, abs=1e-12)
