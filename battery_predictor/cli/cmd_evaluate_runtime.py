@@ -215,7 +215,7 @@ def report_markdown(summary: dict) -> str:
     lines = ["# Remaining runtime on measured recordings", "",
              f"Made by `battery-predictor {' '.join(shlex.quote(a) for a in sys.argv[1:])}`", "",
              f"Params `{Path(summary['params']).name}`, cut-off {summary['cutoff_v']:.2f} V, peaks from "
-             f"{summary['peak_source']}s, constant {summary['load_model']} ahead, drift correction {summary['drift_correction']}, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
+             f"{summary['peak_source']}s, constant {summary['load_model']} ahead, drift correction {summary['drift_correction']}, temperature ahead {summary['thermal_forecast']}, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
              "discharge. Counter capacities: " + ", ".join(f"{k} {v:.3f} Ah" for k, v in summary["capacities_ah"].items())
              + ". MAE / bias in min; worst late % = the largest error relative to the true remaining time after "
              f"{summary['late_after_fraction']:.0%} of the discharge.", "", head,
