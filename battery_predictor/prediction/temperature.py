@@ -20,8 +20,9 @@ and errs warm (a shorter cool-down ahead, so a warmer, longer forecast) when the
 a cell still warm from charging or driving.
 
 Fallbacks, each stated in :attr:`TemperatureAhead.note` and never an error: params without a thermal
-cell (or a pack model that is not the engine's thermal one) hold the latest measured temperature, as
-before; no usable ambient takes the cell's own temperature as the ambient; ``thermal_forecast:
+cell hold the latest measured temperature, as before (a thermal cell on PyBaMM stepping, which the engine
+does not cover, runs as before: from its carried temperature with the measured one as the ambient); no
+usable ambient takes the cell's own temperature as the ambient; ``thermal_forecast:
 held`` asks for the held temperature.
 """
 
@@ -30,6 +31,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
+
+from battery_predictor.simulation.cell_setup import is_lumped_thermal
 
 if TYPE_CHECKING:
     from battery_predictor.prediction.pack_model import PackModel, RunStart
@@ -139,6 +142,11 @@ def temperature_ahead(runner: PackModel, cell_temperature_k: float, ambient_k: f
         return TemperatureAhead(cell_temperature_k, cell_temperature_k, False,
                                 "temperature held (thermal_forecast held)")
     if not self_heating(runner):
+        params = getattr(runner, "params", None)
+        if params is not None and is_lumped_thermal(params):  # PyBaMM stepping of a thermal cell: as before
+            return TemperatureAhead(cell_temperature_k, cell_temperature_k, False,
+                                    "the lumped thermal cell runs on PyBaMM stepping, which heats it from its "
+                                    "carried temperature with the measured one as the ambient")
         return TemperatureAhead(cell_temperature_k, cell_temperature_k, False,
                                 "temperature held (the params carry no lumped thermal cell on the engine)")
     if not plausible_temperature(cell_temperature_k):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -95,6 +96,13 @@ def test_an_unusable_cell_temperature_holds_it_with_a_reason(thermal_pack, cell_
     ahead = temperature_ahead(thermal_pack, cell_k, ambient_k)
     assert not ahead.self_heating and why in ahead.note
     assert ahead.start(thermal_pack, 0.5) == 0.5
+
+
+def test_a_thermal_cell_on_pybamm_stepping_says_how_it_runs(cold_cell):
+    stepping = SimpleNamespace(params=replace(cold_cell, options={"thermal": "lumped"}))  # no at_cell_temperature
+    ahead = temperature_ahead(stepping, 290.0, 280.0)
+    assert not ahead.self_heating and ahead.run_temperature_k == 290.0 and "PyBaMM stepping" in ahead.note
+    assert "no lumped thermal cell" in temperature_ahead(SimpleNamespace(params=cold_cell), 290.0, 280.0).note
 
 
 @pytest.mark.parametrize("ambient_k", [math.nan, -1.0, 1e6])
