@@ -48,6 +48,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--drift-correction", choices=("full", "smallest"), default=None,
                    help="where a carried state that left the state tolerance goes (default: the predictor's, full; "
                         "see the node parameter drift_correction)")
+    p.add_argument("--thermal-forecast", choices=("auto", "held"), default=None,
+                   help="the cell temperature ahead: integrated by the params' lumped thermal cell when they carry one "
+                        "(auto), or held at the latest measurement (default: the predictor's, auto; see the node "
+                        "parameter thermal_forecast)")
+    p.add_argument("--ambient-k", type=float, default=None, metavar="K",
+                   help="ambient temperature of a self-heating forecast, K (default: the lowest cell temperature "
+                        "measured in the discharge cycle; node parameter ambient_temperature_k)")
     p.add_argument("--calibrate-uncertainty", default=None, metavar="PARAMS_OUT",
                    help="calibrate the structural runtime spread so that P10..P90 holds 80 %% of these recordings' "
                         "checkpoints (use the fit recordings, judge on others) and write the params with it here")
@@ -109,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
             raise InputDataError("--capacity-from: none of these recordings ends at the cut-off")
         capacities["measured"] = sum(known) / len(known)
     options = {"peak_source": args.peak_source, "load_model": args.load_model,
-               "drift_correction": args.drift_correction}
+               "drift_correction": args.drift_correction, "thermal_forecast": args.thermal_forecast,
+               "ambient_temperature_k": args.ambient_k}
     config = PredictorConfig(params_file=str(params.source), cutoff_voltage_v=cutoff_v,
                              **{k: v for k, v in options.items() if v})
     recordings = [load(path) for path in args.data]  # every input is checked before minutes of evaluation
@@ -126,7 +134,9 @@ def run(args: argparse.Namespace) -> int:
         written = calibrated.to_yaml(args.calibrate_uncertainty)
         summary["calibrated_uncertainty"] = {**calibrated.provenance["uncertainty"], "params_out": str(written)}
     summary.update({"params": str(params.source), "cutoff_v": cutoff_v, "peak_source": config.peak_source,
-                    "load_model": config.load_model, "drift_correction": config.drift_correction, "capacities_ah": capacities,
+                    "load_model": config.load_model, "drift_correction": config.drift_correction,
+                    "thermal_forecast": config.thermal_forecast, "ambient_temperature_k": config.ambient_temperature_k,
+                    "capacities_ah": capacities,
                     "checkpoints": list(checkpoints), "seconds": time.perf_counter() - tic})
     if out_dir is not None:
         _write_outputs(out_dir, summary, results)
@@ -205,7 +215,7 @@ def report_markdown(summary: dict) -> str:
     lines = ["# Remaining runtime on measured recordings", "",
              f"Made by `battery-predictor {' '.join(shlex.quote(a) for a in sys.argv[1:])}`", "",
              f"Params `{Path(summary['params']).name}`, cut-off {summary['cutoff_v']:.2f} V, peaks from "
-             f"{summary['peak_source']}s, constant {summary['load_model']} ahead, drift correction {summary['drift_correction']}, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
+             f"{summary['peak_source']}s, constant {summary['load_model']} ahead, drift correction {summary['drift_correction']}, temperature ahead {summary['thermal_forecast']}, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
              "discharge. Counter capacities: " + ", ".join(f"{k} {v:.3f} Ah" for k, v in summary["capacities_ah"].items())
              + ". MAE / bias in min; worst late % = the largest error relative to the true remaining time after "
              f"{summary['late_after_fraction']:.0%} of the discharge.", "", head,

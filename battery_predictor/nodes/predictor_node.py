@@ -79,6 +79,7 @@ from battery_predictor.prediction.planning import RoutePlan
 from battery_predictor.prediction.route import RouteDecision, rejected
 from battery_predictor.prediction.station_services import StationServices, StationServicesConfig
 from battery_predictor.prediction.tasks import TaskPlan, invalid_plan
+from battery_predictor.prediction.temperature import THERMAL_FORECASTS
 
 #: A pack state this much older than the latest one restarts the predictor (time base restarted), s.
 TIME_BACK_RESET_S = 60.0
@@ -279,6 +280,16 @@ class PredictorNode(Node):
                 "A carried state more than state_tolerance_v_per_cell off the measurement is recalibrated onto "
                 "it ('full') or just inside the tolerance, half of it left on the side it left ('smallest'; "
                 "for flat-OCV cells such as LiFePO4).", DRIFT_CORRECTIONS),
+            thermal_forecast=declare_str(
+                self, "thermal_forecast", PredictorConfig.thermal_forecast,
+                "The cell temperature ahead of the runtime forecast: 'auto' integrates it from the latest measured "
+                "temperature with the params' lumped thermal cell when they carry one (heat from the load, exchange "
+                "with ambient_temperature_k), else holds it; 'held' always holds the latest measurement.",
+                THERMAL_FORECASTS),
+            ambient_temperature_k=_unset(declare_float(
+                self, "ambient_temperature_k", 0.0,
+                "Ambient temperature of a self-heating forecast, K; 0 = the lowest cell temperature measured "
+                "since the present discharge cycle began.", 0.0, 400.0)),
             simulator=declare_str(self, "simulator", PredictorConfig.simulator,
                                   "Pack model: 'auto' (the SPM engine unless the params activate extensions, then "
                                   "PyBaMM's solver), 'engine' or 'pybamm'.", BACKENDS),

@@ -82,6 +82,13 @@ def _solve_monotone(f: Callable[[float], float], bounds: tuple[float, float],
     return float(x), float(f(x)), ""
 
 
+def _start(runner: PackModel, soc: float, cell_temperature_k: float | None) -> object:
+    """A run's start at ``soc``: with its cells at ``cell_temperature_k`` (K) when given (lumped thermal cells)."""
+    if cell_temperature_k is None:
+        return soc
+    return runner.at_cell_temperature(soc, cell_temperature_k)  # type: ignore[attr-defined]
+
+
 def _check_finite(**values: float) -> None:
     for name, val in values.items():
         if not math.isfinite(val):
@@ -89,7 +96,8 @@ def _check_finite(**values: float) -> None:
 
 
 def calibrate_soc(runner: PackModel, voltage_v: float, current_a: float, temperature_k: float,
-                  settle_s: float = 60.0, tol_soc: float = 1e-4) -> Calibration:
+                  settle_s: float = 60.0, tol_soc: float = 1e-4, *,
+                  cell_temperature_k: float | None = None) -> Calibration:
     """SOC whose ``settle_s`` simulation at ``current_a`` ends at the measured ``voltage_v``.
 
     Parameters
@@ -101,16 +109,19 @@ def calibrate_soc(runner: PackModel, voltage_v: float, current_a: float, tempera
     current_a : float
         Measured pack current in A (positive = discharge).
     temperature_k : float
-        Measured temperature in K.
+        Measured temperature in K (a lumped thermal cell's ambient when ``cell_temperature_k`` is given).
     settle_s : float
         Length of the short simulation in s.
+    cell_temperature_k : float, optional
+        Lumped thermal cells: the cells start at this measured temperature (K) instead of ``temperature_k``
+        (``runner.at_cell_temperature``).
     """
     _check_finite(voltage=voltage_v, current=current_a, temperature=temperature_k)
     holder: dict = {}
 
     def f(soc: float) -> float:
         try:
-            run = runner.run(soc, [(settle_s, current_a)], temperature_k)
+            run = runner.run(_start(runner, soc, cell_temperature_k), [(settle_s, current_a)], temperature_k)
         except SimulationError as exc:
             if "Minimum voltage" not in str(exc):
                 raise
@@ -152,7 +163,8 @@ def history_segments(time_s: npt.ArrayLike, current_a: npt.ArrayLike,
 def calibrate_on_history(runner: PackModel, time_s: npt.ArrayLike, voltage_v: npt.ArrayLike, current_a: npt.ArrayLike,
                          temperature_k: float, *,
                          window_s: float = 600.0, match_s: float = 120.0, max_segments: int = 12,
-                         tol_soc: float = 5e-4, target_residual_v: float = 0.0) -> Calibration:
+                         tol_soc: float = 5e-4, target_residual_v: float = 0.0,
+                         cell_temperature_k: float | None = None) -> Calibration:
     """Calibrate on the last ``window_s`` of history; returns the present SOC and state.
 
     Parameters
@@ -160,7 +172,7 @@ def calibrate_on_history(runner: PackModel, time_s: npt.ArrayLike, voltage_v: np
     time_s, voltage_v, current_a : array_like
         Pack history (s, V, A positive = discharge), increasing time; the last sample is "now".
     temperature_k : float
-        Temperature in K.
+        Temperature in K (a lumped thermal cell's ambient when ``cell_temperature_k`` is given).
     window_s : float
         History simulated from the unknown start SOC.
     match_s : float
@@ -169,6 +181,9 @@ def calibrate_on_history(runner: PackModel, time_s: npt.ArrayLike, voltage_v: np
         Simulated minus measured mean voltage the solution should leave, V (0: reproduce the measurement;
         the predictor's smallest correction of a drifted state leaves part of its tolerance). Ignored when
         the history is too short to calibrate on.
+    cell_temperature_k : float, optional
+        Lumped thermal cells: the temperature (K) measured at the window's start, where the cells start
+        (also the start of the settle when the history is too short to calibrate on).
     """
     t = np.asarray(time_s, dtype=float)
     v = np.asarray(voltage_v, dtype=float)
@@ -179,7 +194,7 @@ def calibrate_on_history(runner: PackModel, time_s: npt.ArrayLike, voltage_v: np
     keep = t >= t[-1] - window_s
     t, v, i = t[keep], v[keep], i[keep]
     if t.size < 3 or t[-1] - t[0] < 2 * match_s / 3:
-        return calibrate_soc(runner, float(v[-1]), float(i[-1]), temperature_k)
+        return calibrate_soc(runner, float(v[-1]), float(i[-1]), temperature_k, cell_temperature_k=cell_temperature_k)
     segs = history_segments(t, i, max_segments)
     rel = t - t[0]
     match = rel >= rel[-1] - match_s
@@ -187,7 +202,7 @@ def calibrate_on_history(runner: PackModel, time_s: npt.ArrayLike, voltage_v: np
 
     def f(soc: float) -> float:
         try:
-            run = runner.run(soc, segs, temperature_k)
+            run = runner.run(_start(runner, soc, cell_temperature_k), segs, temperature_k)
         except SimulationError as exc:
             if "Minimum voltage" not in str(exc):
                 raise

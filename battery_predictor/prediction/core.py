@@ -28,6 +28,13 @@ from battery_predictor.prediction.priority import RoutePriority, YieldingRunner
 from battery_predictor.prediction.route import RouteDecision, rejected
 from battery_predictor.prediction.runtime import RuntimePrediction, predict_remaining_runtime
 from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v, unexplained_jump_v
+from battery_predictor.prediction.temperature import (
+    THERMAL_FORECASTS,
+    AmbientEstimate,
+    TemperatureAhead,
+    plausible_temperature,
+    temperature_ahead,
+)
 from battery_predictor.prediction.uncertainty import (
     LoadAhead,
     Spread,
@@ -37,6 +44,7 @@ from battery_predictor.prediction.uncertainty import (
     runtime_spread,
     uncertainty_model,
 )
+from battery_predictor.simulation.cell_setup import is_lumped_thermal, with_thermal
 
 if TYPE_CHECKING:
     from battery_predictor.profiles.ranger import RouteSection
@@ -131,6 +139,15 @@ class PredictorConfig:
         Where the OCV is flat (LiFePO4's plateau) a voltage the model misses by the tolerance is a large part
         of the charge. Measured (docs/runtime_real_data/other_cells.md): the fit recordings of three cells
         tie (pooled MAE 3.65 full / 3.72 smallest min); held out, K2 LiFePO4 7.5 -> 3.8 min, LG M50 6.9 -> 7.1.
+    thermal_forecast : str
+        ``"auto"`` (default): when the params carry a lumped thermal cell that the engine runs, the runtime
+        forecast starts the cells at the latest measured temperature and integrates it with that cell's heat
+        equation (heat from the load, exchange with ``ambient_temperature_k``); otherwise the forecast holds
+        the latest measured temperature. ``"held"``: the params' cell is made isothermal (PyBaMM's option) and
+        every run holds the latest measured temperature. See :mod:`.temperature`.
+    ambient_temperature_k : float
+        Ambient temperature of a self-heating forecast, K; NaN (default) = the lowest cell temperature measured
+        since the present discharge cycle began (:class:`.temperature.AmbientEstimate`).
     decision_risk : float
         Accepted probability that the pack ends a route (or a task and the walk back to the
         charger) below its threshold (0 < risk <= 0.5): accepted when the voltage the pack stays
@@ -160,6 +177,8 @@ class PredictorConfig:
     simulator: str = "auto"
     decision_risk: float = 0.1
     drift_correction: str = "full"
+    thermal_forecast: str = "auto"
+    ambient_temperature_k: float = math.nan
 
 
 #: What of the average load the runtime keeps constant (``PredictorConfig.load_model``).
@@ -221,10 +240,16 @@ class PredictorCore:
         self._cell_cutoff_v: float | None = None
         self._history: deque[tuple[float, float, float, float]] = deque()
         self._cal_lock = threading.Lock()
-        self._cal: tuple[float, float, Calibration] | None = None  # (stamp, full-calibration stamp, cal)
+        # (stamp, full-calibration stamp, cal) per kind: False the runs at the measured temperature (routes, and
+        # the forecast of an isothermal cell), True a self-heating forecast's (cells at the measured temperatures)
+        self._cals: dict[bool, tuple[float, float, Calibration]] = {}
         if config.drift_correction not in DRIFT_CORRECTIONS:
             raise ValueError(f"drift_correction {config.drift_correction!r} is not one of "
                              f"{', '.join(DRIFT_CORRECTIONS)}")
+        if config.thermal_forecast not in THERMAL_FORECASTS:
+            raise ValueError(f"thermal_forecast {config.thermal_forecast!r} is not one of {', '.join(THERMAL_FORECASTS)}")
+        #: Lowest cell temperature measured since the present discharge cycle began (the ambient estimate).
+        self._ambient = AmbientEstimate()
         if config.load_model not in LOAD_MODELS:
             raise ValueError(f"load_model {config.load_model!r} is not one of {', '.join(LOAD_MODELS)}")
         if not 0.0 < config.decision_risk <= 0.5:
@@ -244,6 +269,9 @@ class PredictorCore:
         self.route_priority = RoutePriority()
         try:
             self.params = params or load_params(Path(config.params_file))
+            if config.thermal_forecast == "held" and is_lumped_thermal(self.params):
+                # held means held: the same cell, isothermal at the latest measured temperature
+                self.params = with_thermal(self.params, "isothermal")
             self.runner, self.model_backend = pack_model(self.params, config.simulator)
         except BatteryPredictorError as exc:
             self.model_error = str(exc)
@@ -308,6 +336,7 @@ class PredictorCore:
                 self._new_state(stamp_s, f"voltage jumped {previous[1]:.2f} -> {voltage_v:.2f} V at "
                                          f"{previous[2]:.2f} -> {current_a:.2f} A, more than the current explains "
                                          "(battery swap, sensor, or the end-of-discharge knee): calibrating afresh")
+            self._ambient.add(temperature_k)
             self._history.append(self._state)
             horizon = max(self.config.calibration_window_s, self.config.recalibrate_after_s, 60.0) + 300.0
             while self._history and self._history[0][0] < stamp_s - horizon:
@@ -322,6 +351,7 @@ class PredictorCore:
         """Forget the calibrated state: the next answer calibrates afresh (caller holds ``_lock``)."""
         self._recalibrate_reason = why
         self.events.append((stamp_s, why))
+        self._ambient.reset()
 
     def latest_state(self) -> tuple[float, float, float, float] | None:
         """(stamp_s, voltage_v, current_a, temperature_k) of the latest state, or None."""
@@ -363,27 +393,34 @@ class PredictorCore:
             return STATUS_STALE_INPUT, f"pack state is stale ({age:.1f} s old, limit {self.config.stale_after_s:.0f} s)", state
         return STATUS_OK, "", state
 
-    def calibration(self, temperature_k: float) -> Calibration:
+    def calibration(self, temperature_k: float, ahead: TemperatureAhead | None = None) -> Calibration:
         """Calibrated present state (cached; propagated between full calibrations).
 
         The state is carried forward with the measured current between full calibrations while
         its voltage stays within ``state_tolerance_v`` of the measurement; otherwise, after a
         jump or a charging session, or after ``recalibrate_after_s``, it is calibrated afresh.
 
+        With a self-heating ``ahead`` (a lumped thermal cell, :mod:`.temperature`) the runs over the history
+        start the cells at the temperature measured where each run starts and take ``ahead``'s ambient, a
+        state of its own (the runtime forecast's); otherwise every run takes ``temperature_k`` (the routes'
+        state, unchanged by the thermal forecast).
+
         Raises
         ------
         BatteryPredictorError
             When the model fails.
         """
+        heating = ahead if ahead is not None and ahead.self_heating else None
         with self._cal_lock:
             with self._lock:
                 hist = list(self._history)
                 if self._recalibrate_reason:  # a new pack state: the cached one must never be continued
-                    self._cal, self._recalibrate_reason = None, ""
+                    self._cals.clear()
+                    self._recalibrate_reason = ""
             if not hist:
                 raise BatteryPredictorError("no pack state to calibrate on")
             stamp = hist[-1][0]
-            cached = self._cal
+            cached = self._cals.get(heating is not None)
             if cached is not None and cached[0] == stamp:
                 return cached[2]
             # a state clipped above full is carried as well: the cell cannot hold more than the model's top, so the
@@ -392,7 +429,7 @@ class PredictorCore:
             # voltage answered the same runtime for half a discharge)
             if (cached is not None and cached[2].state is not None and cached[2].clipped in ("", "above_full")
                     and stamp - cached[1] < self.config.recalibrate_after_s and stamp > cached[0]):
-                propagated = self._propagate(cached, hist, temperature_k)
+                propagated = self._propagate(cached, hist, temperature_k, heating)
                 if propagated is not None:
                     return propagated
                 if self.config.drift_correction == "smallest" and math.isfinite(self._drift_v):
@@ -400,26 +437,31 @@ class PredictorCore:
                     # (half the band), not onto the measurement: where the OCV is flat (LiFePO4's plateau) a
                     # voltage the model misses by the tolerance is a large part of the charge
                     target = math.copysign(0.5 * self.state_tolerance_v, self._drift_v)
-                    return self._calibrate_fresh(hist, temperature_k, target_residual_v=target)
-            return self._calibrate_fresh(hist, temperature_k)
+                    return self._calibrate_fresh(hist, temperature_k, heating, target_residual_v=target)
+            return self._calibrate_fresh(hist, temperature_k, heating)
 
     def precalibrate(self) -> None:
         """Calibrate the latest pack state now, at its temperature, so the next answers find it cached.
 
         Called when a pack state arrives (the node's state callback), so a route answer does not
-        calibrate. Never raises: an answer that needs the calibration meets the failure again and
+        calibrate; a self-heating forecast's state (:meth:`calibration` with its ``ahead``) is carried
+        too. Never raises: an answer that needs the calibration meets the failure again and
         reports it.
         """
         state = self.latest_state()
         if self.runner is None or state is None:
             return
         try:
-            self.calibration(self._temperature(state[3]))
+            temperature_k = self._temperature(state[3])
+            self.calibration(temperature_k)
+            ahead = self.temperature_ahead(temperature_k)
+            if ahead.self_heating:  # the runtime forecast's own state, carried window by window as the routes'
+                self.calibration(temperature_k, ahead)
         except BatteryPredictorError:
             pass
 
     def _propagate(self, cached: tuple[float, float, Calibration], hist: list[tuple[float, float, float, float]],
-                   temperature_k: float) -> Calibration | None:
+                   temperature_k: float, heating: TemperatureAhead | None = None) -> Calibration | None:
         """The cached state carried to now by the measured current, or None when it left the measurement
         (then ``_drift_v`` holds its residual, else NaN)."""
         self._drift_v = math.nan
@@ -432,6 +474,9 @@ class PredictorCore:
         start = cached[2].state
         if start is None:
             return None
+        if heating is not None:  # from the temperature measured where the carried state stands, in the ambient
+            start = self._runner().at_cell_temperature(start, self._temperature(newer[0][3]))  # type: ignore[attr-defined]
+            temperature_k = heating.ambient_k
         run = self._runner().run(start, segs, temperature_k)
         if run.final_state is None or run.reached_cutoff:
             return None
@@ -447,28 +492,43 @@ class PredictorCore:
             return None
         cal = Calibration(self._runner().soc_of(run.final_state), residual, "above_full" if still_above else "",
                           run.final_state, residual)
-        self._cal = (hist[-1][0], cached[1], cal)
+        self._cals[heating is not None] = (hist[-1][0], cached[1], cal)
         return cal
 
-    def _calibrate_fresh(self, hist: list[tuple[float, float, float, float]], temperature_k: float, *,
-                         target_residual_v: float = 0.0) -> Calibration:
+    def _calibrate_fresh(self, hist: list[tuple[float, float, float, float]], temperature_k: float,
+                         heating: TemperatureAhead | None = None, *, target_residual_v: float = 0.0) -> Calibration:
         t = np.array([h[0] for h in hist])
         v = np.array([h[1] for h in hist])
         i = np.array([h[2] for h in hist])
         window = self.config.calibration_window_s
         runner = self._runner()
+        cell_k = None
+        if heating is not None:  # the window's runs start at the temperature measured there, in the ambient
+            first = int(np.searchsorted(t, t[-1] - max(window, 1.0))) if window > 0 else len(hist) - 1
+            cell_k, temperature_k = self._temperature(hist[first][3]), heating.ambient_k
         cal = calibrate_on_history(runner, t, v, i, temperature_k, window_s=max(window, 1.0),
-                                   target_residual_v=target_residual_v) if window > 0 \
-            else calibrate_on_history(runner, t[-1:], v[-1:], i[-1:], temperature_k)
-        self._cal = (t[-1], t[-1], cal)
+                                   target_residual_v=target_residual_v, cell_temperature_k=cell_k) if window > 0 \
+            else calibrate_on_history(runner, t[-1:], v[-1:], i[-1:], temperature_k, cell_temperature_k=cell_k)
+        self._cals[heating is not None] = (t[-1], t[-1], cal)
         return cal
 
     def _peak_duration_s(self) -> float:
         return self.config.peak_duration_s if self.config.peak_source == "sample" else 5.0
 
     def _temperature(self, temperature_k: float) -> float:
-        return temperature_k if math.isfinite(temperature_k) and 200 < temperature_k < 400 else \
-            self.default_temperature_k
+        return temperature_k if plausible_temperature(temperature_k) else self.default_temperature_k
+
+    def temperature_ahead(self, cell_temperature_k: float) -> TemperatureAhead:
+        """How the forecast from a cell at ``cell_temperature_k`` (K) treats the temperature ahead (:mod:`.temperature`)."""
+        stated = self.config.ambient_temperature_k
+        if plausible_temperature(stated):
+            ambient, source = stated, "stated"
+        else:
+            with self._lock:
+                ambient = self._ambient.value_k
+            source = "the lowest cell temperature measured in this discharge cycle"
+        return temperature_ahead(self._runner(), cell_temperature_k, ambient, self.config.thermal_forecast,
+                                 ambient_source=source)
 
     # --------------------------------------------------------------- answers
     def remaining_runtime(self, now_s: float) -> RuntimeStatus:
@@ -501,8 +561,12 @@ class PredictorCore:
         mean_power_w = load.mean_power_w if kind.exponent > 0 else math.nan
         power = mean_power_w if math.isfinite(mean_power_w) and mean_power_w > 0 else None
         try:
-            pred = predict_remaining_runtime(self._background_runner(), v, i, temp, avg, cutoff,
-                                             calibration=self.calibration(temp),
+            ahead = self.temperature_ahead(temp)
+            cal = self.calibration(temp, ahead)
+            if ahead.self_heating:  # the cells start at the measured temperature and warm (or cool) from there
+                cal = replace(cal, state=ahead.start(self._runner(), cal.start))
+            pred = predict_remaining_runtime(self._background_runner(), v, i, ahead.run_temperature_k, avg, cutoff,
+                                             calibration=cal,
                                              peak_current_a=peak if math.isfinite(peak) else None,
                                              peak_duration_s=self._peak_duration_s(), average_power_w=power,
                                              load_exponent=kind.exponent)
@@ -529,8 +593,13 @@ class PredictorCore:
         band = f" (P10..P90 {p10 / 60:.1f}..{p90 / 60:.1f} min)" if spread is not None else ""
         until = (f"a cell reaches its {self.params.cell_lower_cutoff_v:.2f} V cut-off (pack above {cutoff:.2f} V)"
                  if pred.cell_limited and self.params is not None else f"{cutoff:.2f} V")
-        reason = (f"{pred.remaining_s / 60:.1f} min{band} at {load_text}{peaks}, {temp - 273.15:.1f} degC until "
-                  f"{until} ({pred.limited_by}){note}")
+        heating = ""
+        if ahead.self_heating:
+            end_k = pred.end_temperature_k
+            heating = (f" ({ahead.note}; {end_k - 273.15:.1f} degC at the end)" if math.isfinite(end_k)
+                       else f" ({ahead.note})")
+        reason = (f"{pred.remaining_s / 60:.1f} min{band} at {load_text}{peaks}, {temp - 273.15:.1f} degC{heating} "
+                  f"until {until} ({pred.limited_by}){note}")
         return RuntimeStatus(stamp, pred.remaining_s, avg, temp, soc, cutoff, True, STATUS_OK, reason, p10, p90,
                              spread)
 

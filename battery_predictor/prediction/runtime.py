@@ -1,7 +1,9 @@
 """Remaining runtime (paper 5.1.5, steps 2-3).
 
 From the calibrated SOC, the pack is simulated under the average load of the present discharge
-cycle at the last measured temperature; the remaining runtime is the time until the pack voltage
+cycle at ``temperature_k``: the last measured temperature for isothermal cells, the ambient for a
+lumped thermal cell, whose start state then carries the measured cell temperature
+(:mod:`.temperature`); the remaining runtime is the time until the pack voltage
 reaches the robot's cut-off (13.30 V for the information robot) or a cell reaches its lower
 cut-off, whichever comes first. The average load is a constant current (the paper's), a
 constant power (the current rises as the voltage falls, as it does behind the robots' DC-DC
@@ -39,7 +41,7 @@ class RuntimePrediction:
     calibration : Calibration
         The calibrated SOC it started from.
     assumed_current_a, assumed_temperature_k : float
-        The load and temperature it assumed.
+        The load (A) and the runs' temperature (K; the ambient of a lumped thermal cell) it assumed.
     cutoff_voltage_v : float
         Pack voltage threshold in V.
     limited_by : str
@@ -51,6 +53,9 @@ class RuntimePrediction:
     cell_limited : bool
         True when a cell's lower cut-off (e.g. a weak series group's), not the pack threshold, ends
         the average-load run.
+    end_temperature_k : float
+        Lumped thermal cells: the (normal) cells' temperature where the average-load run ends (its cut-off or
+        the horizon), K; NaN for isothermal cells.
     """
 
     remaining_s: float
@@ -62,6 +67,13 @@ class RuntimePrediction:
     average_end_s: float = math.nan
     charge_to_end_ah: float = math.nan
     cell_limited: bool = False
+    end_temperature_k: float = math.nan
+
+
+def run_end_temperature_k(run: SegmentRun) -> float:
+    """The cells' temperature (K) where ``run`` ended: a lumped thermal state's (normal cells), else NaN."""
+    temperatures = getattr(run.final_state, "cell_temperature_k", None)
+    return float(np.asarray(temperatures).ravel()[0]) if temperatures is not None else math.nan
 
 
 def time_to_voltage_s(time_s: np.ndarray, voltage_v: np.ndarray, threshold_v: float) -> float | None:
@@ -278,7 +290,9 @@ def predict_remaining_runtime(runner: PackModel, voltage_v: float, current_a: fl
     runner : PackModel
         The fitted pack model.
     voltage_v, current_a, temperature_k : float
-        Latest measured pack voltage (V), current (A, positive = discharge) and temperature (K).
+        Latest measured pack voltage (V), current (A, positive = discharge) and the runs' temperature (K):
+        the latest measured one for isothermal cells; the ambient for lumped thermal cells, whose start
+        (``calibration``) carries the cell temperature (:class:`.temperature.TemperatureAhead`).
     average_current_a : float
         Average discharge current of the present cycle in A (> 0).
     cutoff_voltage_v : float
@@ -316,16 +330,19 @@ def predict_remaining_runtime(runner: PackModel, voltage_v: float, current_a: fl
     t_avg = run_end_s(run, cutoff_voltage_v)
     ends = (t_avg, path_charge_ah(path, t_avg)) if t_avg is not None else (math.nan, math.nan)
     cell_limited = bool(run.reached_cutoff) and time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v) is None
+    end_k = run_end_temperature_k(run)
     if peak_current_a is not None and peak_current_a > average_current_a:
         t_peak = peak_crossing_s(runner, cal.start, path, float(peak_current_a) / average_current_a, temperature_k,
                                  cutoff_voltage_v, run, settle_s=peak_duration_s)
         if t_peak is not None:
             return RuntimePrediction(t_peak, cal, assumed_a, temperature_k, cutoff_voltage_v, "peak_cutoff", *ends,
-                                     cell_limited=cell_limited)
+                                     cell_limited=cell_limited, end_temperature_k=end_k)
     t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
     if t_pack is not None:
-        return RuntimePrediction(t_pack, cal, assumed_a, temperature_k, cutoff_voltage_v, "pack_cutoff", *ends)
+        return RuntimePrediction(t_pack, cal, assumed_a, temperature_k, cutoff_voltage_v, "pack_cutoff", *ends,
+                                 end_temperature_k=end_k)
     if run.reached_cutoff:
         return RuntimePrediction(run.end_time_s, cal, assumed_a, temperature_k, cutoff_voltage_v, "cell_cutoff",
-                                 *ends, cell_limited=True)
-    return RuntimePrediction(horizon_s, cal, assumed_a, temperature_k, cutoff_voltage_v, "horizon")
+                                 *ends, cell_limited=True, end_temperature_k=end_k)
+    return RuntimePrediction(horizon_s, cal, assumed_a, temperature_k, cutoff_voltage_v, "horizon",
+                             end_temperature_k=end_k)

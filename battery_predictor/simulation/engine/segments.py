@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -202,6 +202,37 @@ class EnginePack:
     def soc_of(self, state: EngineState) -> float:
         """SOC of a carried state: start SOC minus the charge drawn over the capacity."""
         return state.soc_start - state.charge_ah / self.capacity_ah
+
+    @property
+    def thermal(self) -> bool:
+        """True when the cells are lumped thermal cells (a run's ``temperature_k`` is then the ambient)."""
+        return self.model.thermal is not None
+
+    def at_cell_temperature(self, start: float | EngineState, cell_temperature_k: float) -> float | EngineState:
+        """``start`` with its cells at ``cell_temperature_k`` (K) instead of the ambient or a carried temperature.
+
+        Lumped thermal cells only (isothermal cells return ``start`` unchanged, their temperature is the
+        run's). An SOC becomes the state a run from that SOC starts in (uniform particles, every group at
+        the SOC), so a run from it equals the run from the SOC but for the starting temperature.
+
+        Raises
+        ------
+        SimulationError
+            When ``cell_temperature_k`` is not a finite temperature within 200..400 K.
+        """
+        if self.model.thermal is None:
+            return start
+        if not (math.isfinite(cell_temperature_k) and 200.0 < cell_temperature_k < 400.0):
+            raise SimulationError(f"cell temperature {cell_temperature_k} K is outside 200..400 K")
+        temperatures = np.full(self._heights.size, float(cell_temperature_k))
+        if isinstance(start, EngineState):
+            return replace(start, cell_temperature_k=temperatures)
+        c_n, c_p = self.concentrations(float(start))  # as run_cells makes uniform particles of them
+        y_n = np.full(self.model.blocks[0].b_vector_per_a_s.size, c_n / self.model.blocks[0].scale_mol_m3)
+        y_p = np.full(self.model.blocks[1].b_vector_per_a_s.size, c_p / self.model.blocks[1].scale_mol_m3)
+        weak = (y_n.copy(), y_p.copy()) if self._heights.size > 1 else None
+        return EngineState(particles=(y_n, y_p), soc_start=float(start), charge_ah=0.0, weak_particles=weak,
+                           cell_temperature_k=temperatures)
 
     # ------------------------------------------------------------------- runs
     def run(self, start: float | EngineState, segments: npt.ArrayLike, temperature_k: float) -> SegmentRun:
