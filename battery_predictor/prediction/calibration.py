@@ -27,6 +27,7 @@ from battery_predictor.prediction.cell_runner import RunState
 
 if TYPE_CHECKING:
     from battery_predictor.prediction.pack_model import PackModel
+    from battery_predictor.simulation.engine.segments import EngineState
 
 _PAST_CUTOFF = -1e3
 
@@ -44,8 +45,9 @@ class Calibration:
         Simulated minus measured pack voltage in V at the solution.
     clipped : str
         ``""``, or ``"below_empty"`` / ``"above_full"`` when the measurement lies outside the model's range.
-    state : RunState or None
-        The present model state (with gradients) when calibrated on history, else None.
+    state : RunState, EngineState or None
+        The present model state (with gradients) when calibrated on history, else None (PyBaMM
+        stepping's or the engine's).
     latest_residual_v : float
         Simulated minus measured pack voltage in V over the latest measurements (the last sample, or
         the matched end of a history window); NaN when unknown.
@@ -54,11 +56,11 @@ class Calibration:
     soc: float
     residual_v: float
     clipped: str = ""
-    state: RunState | None = None
+    state: RunState | EngineState | None = None
     latest_residual_v: float = math.nan
 
     @property
-    def start(self) -> float | RunState:
+    def start(self) -> float | RunState | EngineState:
         """What a prediction continues from: the state when known, else the SOC."""
         return self.state if self.state is not None else self.soc
 

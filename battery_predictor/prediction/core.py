@@ -564,7 +564,8 @@ class PredictorCore:
             ahead = self.temperature_ahead(temp)
             cal = self.calibration(temp, ahead)
             if ahead.self_heating:  # the cells start at the measured temperature and warm (or cool) from there
-                cal = replace(cal, state=ahead.start(self._runner(), cal.start))
+                started = ahead.start(self._runner(), cal.start)
+                cal = replace(cal, state=started) if not isinstance(started, float) else cal
             pred = predict_remaining_runtime(self._background_runner(), v, i, ahead.run_temperature_k, avg, cutoff,
                                              calibration=cal,
                                              peak_current_a=peak if math.isfinite(peak) else None,
