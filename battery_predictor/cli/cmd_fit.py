@@ -155,6 +155,7 @@ def _provenance(args: argparse.Namespace, recs: Sequence[Recording], best: Evalu
         "fitted_by": "battery-predictor fit (Optuna TPE, R2_mod of the seed paper Eq. 1-3)",
         "fitted_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "data": [str(r.source) for r in recs],
+        "resample_s": args.resample,
         "r2_mod": best.r2_mod,
         "r2_mod_per_file": best.per_recording,
         "rmse_mv_per_file": best.rmse_mv,
