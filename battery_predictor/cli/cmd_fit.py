@@ -19,9 +19,7 @@ from battery_predictor.cli.common import (
     add_data_arguments,
     check_output_file,
     check_plot_file,
-    data_options,
     engine_fallback,
-    load_data,
     print_json,
     progress_wanted,
 )
@@ -60,7 +58,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(group<k>_voltage_V) and the params use cell_imbalance (default: the weakest group's "
                         "voltage is fitted too)")
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
-                   help="average the data over windows of this many seconds first (as the battery monitor does)")
+                   help="average the data over windows of this many seconds first (default: data sampled faster "
+                        "than the battery monitor's 5 s window are averaged over it, as the predictor nodes see them)")
+    p.add_argument("--no-resample", action="store_true",
+                   help="fit the samples as measured, also when they are denser than the monitor's window")
     p.add_argument("--trials", type=int, default=None, help="tpe: total TPE trials (default 1000)")
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
     p.add_argument("--storage", default=None,
@@ -98,11 +99,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_tpe(args: argparse.Namespace) -> int:
     """``fit --method tpe``: the paper's TPE fit of the raw parameters; writes the params file and the plot."""
-    from battery_predictor.cli.fit_identify import simulator_named
+    from battery_predictor.cli.fit_identify import prepared_data, simulator_named
     from battery_predictor.fitting.identification import raw_identifiability
     from battery_predictor.fitting.optimiser import TPEOptimiser
     from battery_predictor.fitting.problem import FitProblem
-    from battery_predictor.fitting.resample import resample_all
     from battery_predictor.fitting.space import fit_space
     from battery_predictor.params import load_params
     from battery_predictor.plots import plot_voltage_fit
@@ -112,7 +112,7 @@ def _run_tpe(args: argparse.Namespace) -> int:
     check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
     check_plot_file(args.plot or Path(args.out).with_suffix(".png"))
     params = with_cold_window_anchors(with_thermal(load_params(args.params), args.thermal))
-    recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
+    recs = prepared_data(args, params)
     out = Path(args.out)
     storage = args.storage or f"sqlite:///{out.with_suffix('.optuna.db').resolve()}"
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -155,6 +155,7 @@ def _provenance(args: argparse.Namespace, recs: Sequence[Recording], best: Evalu
         "fitted_by": "battery-predictor fit (Optuna TPE, R2_mod of the seed paper Eq. 1-3)",
         "fitted_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "data": [str(r.source) for r in recs],
+        "resample_s": args.resample,
         "r2_mod": best.r2_mod,
         "r2_mod_per_file": best.per_recording,
         "rmse_mv_per_file": best.rmse_mv,

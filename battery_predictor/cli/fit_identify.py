@@ -47,6 +47,21 @@ def _progress_printer(enabled: bool) -> Callable[[str, int, float], None] | None
     return show
 
 
+def prepared_data(args: argparse.Namespace, params: PackParams) -> list[Recording]:
+    """``fit``'s recordings: loaded, then averaged over ``--resample`` windows or, by default, over the battery
+    monitor's window when the data are denser (:func:`~battery_predictor.fitting.resample.as_the_monitor_sees`);
+    says so on stderr and sets ``args.resample`` to the window applied (for the provenance)."""
+    from battery_predictor.fitting.resample import as_the_monitor_sees
+
+    recs, args.resample, notice = as_the_monitor_sees(load_data(args.data, pack=params, **data_options(args)),
+                                                      args.resample,
+                                                      as_measured=getattr(args, "no_resample", False))
+    if notice:
+        sys.stderr.write(f"fit: {notice}\n")
+        sys.stderr.flush()
+    return recs
+
+
 def run_identify(args: argparse.Namespace) -> int:
     """Run the identification, write the fitted params, plot, and report identifiability."""
     from battery_predictor.fitting.identification import (
@@ -56,7 +71,6 @@ def run_identify(args: argparse.Namespace) -> int:
         identifiability_of,
         identify,
     )
-    from battery_predictor.fitting.resample import resample_all
     from battery_predictor.params import load_params
     from battery_predictor.plots import plot_voltage_fit
     from battery_predictor.simulation.cell_setup import is_lumped_thermal, with_thermal
@@ -67,7 +81,7 @@ def run_identify(args: argparse.Namespace) -> int:
     params = with_fitted_extension_keys(with_cold_window_anchors(
         with_thermal(load_params(args.params), getattr(args, "thermal", "params"))))
     thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
-    recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
+    recs = prepared_data(args, params)
     space = _space(params, recs, tuple(args.coordinates))
     problem = IdentificationProblem(params=params, recordings=recs, simulator=simulator_named(args.simulator),
                                     space=space, group_voltages=not getattr(args, "ignore_group_voltages", False))
@@ -87,7 +101,7 @@ def run_identify(args: argparse.Namespace) -> int:
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}",
                      identifiability=report.plot_rows())
     if args.json:
-        print_json({"method": "identify", "r2_mod": best.r2_mod, "r2_mod_per_file": best.per_recording,
+        print_json({"method": "identify", "resample_s": args.resample, "r2_mod": best.r2_mod, "r2_mod_per_file": best.per_recording,
                     "rmse_mv_per_file": best.rmse_mv, "evaluations": result.evaluations,
                     "tpe_evaluations": result.tpe_evaluations, "seconds": result.seconds,
                     "model_seconds": result.model_seconds, "optimiser_seconds": result.optimiser_seconds,

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
 from battery_predictor.errors import InputDataError
+from battery_predictor.monitor.core import MonitorConfig
 from battery_predictor.recording import Recording
+
+#: The battery monitor's default averaging window (s): what the predictor nodes are fed.
+MONITOR_WINDOW_S: float = MonitorConfig.window_s
 
 
 def _hold_durations_s(time_s: np.ndarray) -> np.ndarray:
@@ -85,3 +89,56 @@ def resample_all(recordings: Iterable[Recording], window_s: float | None) -> lis
     if window_s is None:
         return list(recordings)
     return [resample_windows(r, window_s) for r in recordings]
+
+
+def median_interval_s(rec: Recording) -> float:
+    """Median spacing of a recording's samples in s (``inf`` for fewer than two samples)."""
+    t = np.asarray(rec.time_s, dtype=float)
+    return float(np.median(np.diff(t))) if t.size > 1 else float("inf")
+
+
+def as_the_monitor_sees(recordings: Sequence[Recording], window_s: float | None = None, *,
+                        as_measured: bool = False,
+                        monitor_window_s: float = MONITOR_WINDOW_S) -> tuple[list[Recording], float | None, str | None]:
+    """``fit``'s data preparation: an explicit window, or the monitor's window when the data are denser.
+
+    The predictor nodes never see samples faster than the battery monitor's window averages, so a
+    fit of denser data averages them the same way unless told otherwise.
+
+    Parameters
+    ----------
+    recordings : Sequence[Recording]
+        The data as loaded.
+    window_s : float or None
+        ``--resample SECONDS``: average over windows of this length (s), whatever the sampling.
+    as_measured : bool
+        ``--no-resample``: keep the samples as measured.
+    monitor_window_s : float
+        The monitor's averaging window in s (default :data:`MONITOR_WINDOW_S`).
+
+    Returns
+    -------
+    recordings : list[Recording]
+        The prepared recordings.
+    window_s : float or None
+        The window applied in s (``None``: as measured).
+    notice : str or None
+        A console line when the default window was applied, saying how to turn it off.
+
+    Raises
+    ------
+    InputDataError
+        When ``window_s`` is not a positive finite number, or both ``window_s`` and ``as_measured`` are given.
+    """
+    if window_s is not None:
+        if as_measured:
+            raise InputDataError("--resample and --no-resample exclude each other")
+        return resample_all(recordings, window_s), float(window_s), None
+    recs = list(recordings)
+    denser = [median_interval_s(r) for r in recs if median_interval_s(r) < monitor_window_s * (1.0 - 1e-3)]
+    if as_measured or not denser:
+        return recs, None, None
+    notice = (f"averaging the data over {monitor_window_s:g} s windows, as the battery monitor feeds the predictor "
+              f"(samples every {min(denser):g} s, median); --resample SECONDS for another window, "
+              "--no-resample to fit the samples as measured")
+    return resample_all(recs, monitor_window_s), float(monitor_window_s), notice
