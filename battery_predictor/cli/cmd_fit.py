@@ -99,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_tpe(args: argparse.Namespace) -> int:
     """``fit --method tpe``: the paper's TPE fit of the raw parameters; writes the params file and the plot."""
-    from battery_predictor.cli.fit_identify import prepared_data, simulator_named
+    from battery_predictor.cli.common import prepared_data
+    from battery_predictor.cli.fit_identify import simulator_named
     from battery_predictor.fitting.identification import raw_identifiability
     from battery_predictor.fitting.optimiser import TPEOptimiser
     from battery_predictor.fitting.problem import FitProblem
@@ -112,7 +113,7 @@ def _run_tpe(args: argparse.Namespace) -> int:
     check_output_file(args.out, "--out", suffixes=(".yaml", ".yml"))
     check_plot_file(args.plot or Path(args.out).with_suffix(".png"))
     params = with_cold_window_anchors(with_thermal(load_params(args.params), args.thermal))
-    recs = prepared_data(args, params)
+    recs = prepared_data(args, params, command="fit")
     out = Path(args.out)
     storage = args.storage or f"sqlite:///{out.with_suffix('.optuna.db').resolve()}"
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -9,9 +9,8 @@ from typing import TYPE_CHECKING, Any
 from battery_predictor.cli.common import (
     add_data_arguments,
     check_plot_file,
-    data_options,
     engine_fallback,
-    load_data,
+    prepared_data,
     print_json,
 )
 from battery_predictor.simulation import SIMULATORS
@@ -38,7 +37,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="initial state: params' concentrations or first measured voltage (default auto); a first "
                         "voltage under load is corrected by the model's own drop at that current")
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
-                   help="average the data over windows of this many seconds first (as the battery monitor does)")
+                   help="average the data over windows of this many seconds first (default: data sampled faster "
+                        "than the battery monitor's 5 s window are averaged over it, as fit does by default)")
+    p.add_argument("--no-resample", action="store_true",
+                   help="simulate and score the samples as measured, also when they are denser than the monitor's window")
     p.add_argument("--plot", default=None, help="write measured vs simulated voltage to this PNG")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -46,7 +48,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from battery_predictor.cli.fit_identify import simulator_named
-    from battery_predictor.fitting.resample import resample_all
     from battery_predictor.params import load_params
 
     if args.plot:
@@ -55,11 +56,12 @@ def run(args: argparse.Namespace) -> int:
     from battery_predictor.simulation.cell_setup import is_lumped_thermal, with_thermal
 
     params = with_thermal(load_params(args.params), args.thermal)
-    recs = resample_all(load_data(args.data, pack=params, **data_options(args)), args.resample)
+    recs = prepared_data(args, params, command="simulate")
     rows, results = _score(params, recs, simulator_named(args.simulator), args.initial_state)
     out = _summary(rows, results, time.perf_counter() - tic, args.simulator)
     out["engine_fallback"] = engine_fallback(results)  # why the engine handed a recording on (None: it did not)
     out["thermal"] = "lumped" if is_lumped_thermal(params) else "isothermal"
+    out["resample_s"] = args.resample  # the window the data were averaged over (None: as measured)
     if args.plot:
         from battery_predictor.plots import plot_voltage_fit
 

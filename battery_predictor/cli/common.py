@@ -84,6 +84,24 @@ def data_options(args: argparse.Namespace) -> dict[str, Any]:
             "expect_discharge": args.expect_discharge}
 
 
+def prepared_data(args: argparse.Namespace, params: PackParams, *, command: str) -> list[Recording]:
+    """``fit``'s and ``simulate``'s recordings, prepared alike.
+
+    Loaded, then averaged over ``--resample`` windows or, by default, over the battery monitor's window
+    when the data are denser (:func:`~battery_predictor.fitting.resample.as_the_monitor_sees`); says so on
+    stderr as ``command`` and sets ``args.resample`` to the window applied (for the provenance).
+    """
+    from battery_predictor.fitting.resample import as_the_monitor_sees
+
+    recs, args.resample, notice = as_the_monitor_sees(load_data(args.data, pack=params, **data_options(args)),
+                                                      args.resample,
+                                                      as_measured=getattr(args, "no_resample", False))
+    if notice:
+        sys.stderr.write(f"{command}: {notice}\n")
+        sys.stderr.flush()
+    return recs
+
+
 def add_data_arguments(parser: argparse.ArgumentParser) -> None:
     """``--data FILE [FILE...]``, ``--no-trim`` and :func:`add_input_check_arguments`."""
     parser.add_argument("--data", nargs="+", required=True, metavar="FILE",

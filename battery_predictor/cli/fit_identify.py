@@ -13,9 +13,8 @@ from typing import TYPE_CHECKING, Any
 from battery_predictor.cli.common import (
     check_output_file,
     check_plot_file,
-    data_options,
     engine_fallback,
-    load_data,
+    prepared_data,
     print_json,
 )
 from battery_predictor.ocp import ocp_origin
@@ -47,21 +46,6 @@ def _progress_printer(enabled: bool) -> Callable[[str, int, float], None] | None
     return show
 
 
-def prepared_data(args: argparse.Namespace, params: PackParams) -> list[Recording]:
-    """``fit``'s recordings: loaded, then averaged over ``--resample`` windows or, by default, over the battery
-    monitor's window when the data are denser (:func:`~battery_predictor.fitting.resample.as_the_monitor_sees`);
-    says so on stderr and sets ``args.resample`` to the window applied (for the provenance)."""
-    from battery_predictor.fitting.resample import as_the_monitor_sees
-
-    recs, args.resample, notice = as_the_monitor_sees(load_data(args.data, pack=params, **data_options(args)),
-                                                      args.resample,
-                                                      as_measured=getattr(args, "no_resample", False))
-    if notice:
-        sys.stderr.write(f"fit: {notice}\n")
-        sys.stderr.flush()
-    return recs
-
-
 def run_identify(args: argparse.Namespace) -> int:
     """Run the identification, write the fitted params, plot, and report identifiability."""
     from battery_predictor.fitting.identification import (
@@ -81,7 +65,7 @@ def run_identify(args: argparse.Namespace) -> int:
     params = with_fitted_extension_keys(with_cold_window_anchors(
         with_thermal(load_params(args.params), getattr(args, "thermal", "params"))))
     thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
-    recs = prepared_data(args, params)
+    recs = prepared_data(args, params, command="fit")
     space = _space(params, recs, tuple(args.coordinates))
     problem = IdentificationProblem(params=params, recordings=recs, simulator=simulator_named(args.simulator),
                                     space=space, group_voltages=not getattr(args, "ignore_group_voltages", False))

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.cli.fit_identify import prepared_data
+from battery_predictor.cli.common import prepared_data
 from battery_predictor.cli.main import build_parser
 from battery_predictor.errors import InputDataError
 from battery_predictor.fitting.resample import MONITOR_WINDOW_S, as_the_monitor_sees, median_interval_s
@@ -66,13 +66,16 @@ def test_no_resample_keeps_the_samples_and_an_explicit_window_wins():
 
 @pytest.mark.parametrize(("extra", "window_s", "said"), [((), 5.0, True), (("--no-resample",), None, False),
                                                           (("--resample", "10"), 10.0, False)])
-def test_fit_prepares_one_second_data_as_the_monitor_sees_them(tmp_path, capsys, extra, window_s, said):
+@pytest.mark.parametrize("command", ["fit", "simulate"])
+def test_fit_and_simulate_prepare_one_second_data_as_the_monitor_sees_them(tmp_path, capsys, extra, window_s, said,
+                                                                            command):
     csv = tmp_path / "one_second.csv"
     save_csv(_recording(1.0), csv)
-    args = build_parser().parse_args(["fit", "--params", "p.yaml", "--data", str(csv), "--out", "f.yaml", *extra])
+    out = ["--out", "f.yaml"] if command == "fit" else []
+    args = build_parser().parse_args([command, "--params", "p.yaml", "--data", str(csv), *out, *extra])
     params = load_params(REPO / "params" / "panasonic_18650pf.yaml")
-    recs = prepared_data(args, params)
-    assert args.resample == window_s  # what the provenance records
+    recs = prepared_data(args, params, command=command)
+    assert args.resample == window_s  # what the provenance / the JSON records
     assert median_interval_s(recs[0]) == pytest.approx(window_s or 1.0)
     err = capsys.readouterr().err
-    assert ("fit: averaging the data over 5 s windows" in err) is said
+    assert (f"{command}: averaging the data over 5 s windows" in err) is said
