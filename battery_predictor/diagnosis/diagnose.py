@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from battery_predictor.diagnosis.candidates import CANDIDATES, Baseline, Candidate
+from battery_predictor.diagnosis.coverage import covered_claim, reference_coverage, refusal_text
 from battery_predictor.diagnosis.decision import (
     GAIN_THRESHOLD_PCT,
     MEASURED_SHIFT_K,
@@ -553,13 +554,22 @@ def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[
     floor_mv = max(noise_mv, reference.rmse_mV if reference is not None else 0.0)
     if best is not None and claim_allowed(base.heldout_rmse_mV, best.heldout_rmse_mV, noise_mv, floor_mv):
         cause, extended, gain = best.cause, best, best.gain_pct
+    # the claim must hold where the references were (mod:`coverage`): not only beyond their depth
+    coverage = (reference_coverage(engine, params, refs, reference, obs, base.socs)
+                if reference is not None and refs and len(base.socs) == len(obs) else None)
+    refusal = None
+    if cause != "none" and best is not None and coverage is not None and not covered_claim(
+            coverage, cause, obs, base.sims, best.sims, noise_mv, floor_mv):
+        refusal = refusal_text(coverage, cause, gain)
+        cause, extended, gain = "none", base, 0.0
     close = []
     if cause != "none":
         close = [r.cause for r in near_lowest(valid, noise_mv) if r is not best and r.gain_pct >= GAIN_THRESHOLD_PCT]
-    evidence = evidence_text(cause, base, best, results, analysis, noise_mv, close, floor_mv, shift_k)
+    evidence = evidence_text(cause, base, best, results, analysis, noise_mv, close, floor_mv, shift_k, refusal)
     return Diagnosis(cause=cause, evidence=evidence, baseline=base, extended=extended, gain_pct=gain,
                      candidates=results, residuals=analysis, noise_mV=noise_mv, params=params, observed=obs,
-                     reference=reference, separable_with=close, temperature_shift_k=shift_k, **run)
+                     reference=reference, separable_with=close, temperature_shift_k=shift_k, coverage=coverage,
+                     **run)
 
 
 def not_judged(params: PackParams, obs: Sequence[Observed], reference: ReferenceFit, reason: str, budget: int,
