@@ -1,33 +1,35 @@
 """How deep the observed recordings go compared with the reference recordings the baseline was fitted on.
 
-The reference fit is shown the reference recordings only: down to the lowest state of charge they
-reached, the reference model is identified by data; below it (a working day that stopped before
+The reference fit is shown the reference recordings only: down to the deepest discharge they
+reached, the reference model is identified by data; beyond it (a working day that stopped before
 its end-of-discharge knee) the model *extrapolates*: where the knee lies follows from the fitted
 capacities and open-circuit potentials, not from any measurement. An observed day that goes
 deeper than every reference shows the baseline's error there whether or not anything changed in
 the battery, and a candidate with a capacity knob (capacity fade above all) moves the knee and
 fits it. That error is not evidence of a change.
 
-The depth is measured as the reference model's state of charge (its 0-100 % window,
-:func:`~battery_predictor.diagnosis.residuals.pack_capacity_ah`): a recording's initial SOC (for
-a reference its identified initial open-circuit voltage; for an observed recording the
-baseline's fitted initial SOC) minus the net charge drawn since, over the model's capacity. The
-observed recording is *covered* until it first goes below the lowest SOC any reference reached.
-A reference that stopped at its cut-off (kept padded by the reference fit) covers everything the
-pack can deliver.
+The depth is the net charge drawn since the start of the recording (Ah, measured): the observed
+recording is *covered* until it first has drawn more than any reference drew. Not the model's
+state of charge: the baseline's fitted initial SOC absorbs the effect itself (a faded or a cold
+cell looks like one that started less charged), so a day with a real loss of capacity would look
+deeper than it is (measured: the Ranger seed-2 capacity-fade and temperature cases of the second
+generator, docs/findings.md). The charge drawn takes the recordings to start from comparable
+states, as a robot's working days do after their charge; an observed day that starts less
+charged than the references makes the guard less strict, not more. A reference that stopped at
+its cut-off (kept padded by the reference fit) covers everything the pack can deliver.
 
 The guard (:func:`covered_claim`): a cause named from the whole held-out part is named only when
 the same claim holds (:func:`~battery_predictor.diagnosis.decision.claim_allowed`, same noise and
 floor) on the held-out samples the references cover. A real change shows there too: capacity
-fade shifts the open-circuit voltage at a given charge drawn and brings the knee forward into
-the covered range; a resistance, an offset, a temperature or a hysteresis act all day.
+fade lowers the voltage at a given charge drawn and brings the knee forward into the covered
+range; a resistance, an offset, a temperature or a hysteresis act all day.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -36,25 +38,24 @@ from battery_predictor.diagnosis.decision import claim_allowed
 from battery_predictor.diagnosis.scoring import held_out_score
 
 if TYPE_CHECKING:
-    from battery_predictor.diagnosis.engine import Engine, Observed, SimOut
+    from battery_predictor.diagnosis.engine import Observed, SimOut
     from battery_predictor.diagnosis.reference import ReferenceFit
-    from battery_predictor.params import PackParams
 
 
 @dataclass
 class Coverage:
-    """The observed recordings' depth against the references' (SOC of the reference model, 0..1).
+    """The observed recordings' depth (net charge drawn since their start, Ah) against the references'.
 
     Attributes
     ----------
-    reference_min_soc : float or None
-        Lowest SOC the reference recordings reached; None when a reference stopped at its cut-off
+    reference_drawn_ah : float or None
+        Most charge any reference recording drew; None when a reference stopped at its cut-off
         (everything covered).
-    observed_min_soc : list of float
-        Lowest SOC of each observed recording (baseline's initial SOC).
+    observed_drawn_ah : list of float
+        Most charge each observed recording drew.
     covered_until_s : list of float
-        Per observed recording, the time (s from its start) at which it first goes below
-        ``reference_min_soc`` (``inf``: never).
+        Per observed recording, the time (s from its start) at which it first has drawn more than
+        ``reference_drawn_ah`` (``inf``: never).
     heldout_samples, covered_heldout_samples : int
         Held-out samples of all observed recordings, and those before ``covered_until_s``.
     cause : str or None
@@ -65,8 +66,8 @@ class Coverage:
         The claim of ``cause`` did not hold on the covered samples: ``none`` is named.
     """
 
-    reference_min_soc: float | None
-    observed_min_soc: list[float]
+    reference_drawn_ah: float | None
+    observed_drawn_ah: list[float]
     covered_until_s: list[float]
     heldout_samples: int = 0
     covered_heldout_samples: int = 0
@@ -74,7 +75,6 @@ class Coverage:
     baseline_rmse_mV: float | None = None
     cause_rmse_mV: float | None = None
     refused: bool = False
-    notes: list[str] = field(default_factory=list)
 
     @property
     def leaves_range(self) -> bool:
@@ -82,60 +82,43 @@ class Coverage:
         return any(math.isfinite(u) for u in self.covered_until_s)
 
     def to_json(self) -> dict[str, Any]:
-        return {"reference_min_soc": self.reference_min_soc, "observed_min_soc": list(self.observed_min_soc),
+        return {"reference_drawn_ah": self.reference_drawn_ah, "observed_drawn_ah": list(self.observed_drawn_ah),
                 "covered_until_s": [u if math.isfinite(u) else None for u in self.covered_until_s],
                 "heldout_samples": self.heldout_samples, "covered_heldout_samples": self.covered_heldout_samples,
                 "cause": self.cause, "baseline_rmse_mV": self.baseline_rmse_mV, "cause_rmse_mV": self.cause_rmse_mV,
                 "refused": self.refused}
 
 
-def soc_trace(obs: Observed, soc0: float, capacity_ah: float) -> np.ndarray:
-    """SOC (0..1 of the model's window) at each sample: ``soc0`` minus the net charge drawn over ``capacity_ah``."""
-    return soc0 - obs.cumulative_charge_ah() / max(capacity_ah, 1e-12)
-
-
-def first_time_below(obs: Observed, soc: np.ndarray, min_soc: float | None) -> float:
-    """Time (s) of the first sample whose SOC is below ``min_soc`` (``inf``: none, or ``min_soc`` None)."""
-    if min_soc is None:
+def first_time_beyond(obs: Observed, drawn_ah: float | None) -> float:
+    """Time (s) of the first sample at which ``obs`` has drawn more than ``drawn_ah`` (``inf``: none, or None)."""
+    if drawn_ah is None:
         return math.inf
-    deeper = np.nonzero(soc < min_soc)[0]
+    deeper = np.nonzero(obs.cumulative_charge_ah() > drawn_ah)[0]
     return float(obs.t[deeper[0]]) if deeper.size else math.inf
 
 
-def reference_coverage(engine: Engine, params: PackParams, refs: Sequence[Observed], reference: ReferenceFit,
-                       observed: Sequence[Observed], observed_socs: Sequence[float]) -> Coverage:
+def reference_coverage(refs: Sequence[Observed], reference: ReferenceFit, observed: Sequence[Observed]) -> Coverage:
     """How deep the observed recordings go against the references (see the module docstring).
 
     Parameters
     ----------
-    engine : Engine
-        The simulator (its SOC window of ``params``).
-    params : PackParams
-        The reference-identified params.
     refs : sequence of Observed
-        The reference recordings.
+        The reference recordings (current in A, discharge positive).
     reference : ReferenceFit
-        The reference fit (initial open-circuit voltage per cell of each reference, V; end padding).
+        The reference fit (whether it kept the end padding of references that stopped at their cut-off).
     observed : sequence of Observed
         The observed recordings.
-    observed_socs : sequence of float
-        The baseline's initial SOC (0..1) of each observed recording.
     """
-    from battery_predictor.diagnosis.engine import soc_from_voltage
-    from battery_predictor.diagnosis.residuals import pack_capacity_ah
-
-    capacity = pack_capacity_ah(engine, params)
-    ref_min: float | None
+    ref_drawn: float | None
     if reference.end_padding and any(r.ends_at_cutoff for r in refs):
-        ref_min = None  # a reference that stopped at its cut-off: the model was shown the end
+        ref_drawn = None  # a reference that stopped at its cut-off: the model was shown the end
     else:
-        ref_min = min(float(np.min(soc_trace(r, soc_from_voltage(engine, params, float(ocv)), capacity)))
-                      for r, ocv in zip(refs, reference.socs))
-    traces = [soc_trace(o, float(s), capacity) for o, s in zip(observed, observed_socs)]
-    until = [first_time_below(o, tr, ref_min) for o, tr in zip(observed, traces)]
+        ref_drawn = max(float(np.max(r.cumulative_charge_ah())) for r in refs)
+    until = [first_time_beyond(o, ref_drawn) for o in observed]
     held = sum(int(o.held_mask.sum()) for o in observed)
     covered = sum(int((o.held_mask & (o.t < u)).sum()) for o, u in zip(observed, until))
-    return Coverage(reference_min_soc=ref_min, observed_min_soc=[float(np.min(tr)) for tr in traces],
+    return Coverage(reference_drawn_ah=ref_drawn,
+                    observed_drawn_ah=[float(np.max(o.cumulative_charge_ah())) for o in observed],
                     covered_until_s=until, heldout_samples=held, covered_heldout_samples=covered)
 
 
@@ -170,12 +153,12 @@ def covered_claim(coverage: Coverage, cause: str, observed: Sequence[Observed], 
 
 def refusal_text(coverage: Coverage, cause: str, whole_gain_pct: float) -> str:
     """The evidence sentence of a claim refused because it rests on depths no reference reached."""
-    ref = coverage.reference_min_soc if coverage.reference_min_soc is not None else float("nan")
-    deepest = min(coverage.observed_min_soc) if coverage.observed_min_soc else float("nan")
+    ref = coverage.reference_drawn_ah if coverage.reference_drawn_ah is not None else float("nan")
+    deepest = max(coverage.observed_drawn_ah) if coverage.observed_drawn_ah else float("nan")
     starts = [u for u in coverage.covered_until_s if math.isfinite(u)]
     where = f" from {min(starts) / 3600.0:.2f} h on" if starts else ""
-    text = (f"No claim: the observed data go deeper than the reference recordings did{where} (down to "
-            f"{100 * deepest:.0f} % SOC of the reference model; the references reached {100 * ref:.0f} %), where "
+    text = (f"No claim: the observed data go deeper than the reference recordings did{where} (up to "
+            f"{deepest:.2f} Ah drawn since their start; the references drew at most {ref:.2f} Ah), where "
             f"the reference model extrapolates (e.g. where the end-of-discharge knee lies). {cause} cuts the "
             f"baseline's held-out error by {whole_gain_pct:.1f} % over the whole held-out part, ")
     if coverage.covered_heldout_samples == 0 or coverage.baseline_rmse_mV is None or coverage.cause_rmse_mV is None:

@@ -555,8 +555,7 @@ def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[
     if best is not None and claim_allowed(base.heldout_rmse_mV, best.heldout_rmse_mV, noise_mv, floor_mv):
         cause, extended, gain = best.cause, best, best.gain_pct
     # the claim must hold where the references were (mod:`coverage`): not only beyond their depth
-    coverage = (reference_coverage(engine, params, refs, reference, obs, base.socs)
-                if reference is not None and refs and len(base.socs) == len(obs) else None)
+    coverage = reference_coverage(refs, reference, obs) if reference is not None and refs else None
     refusal = None
     if cause != "none" and best is not None and coverage is not None and not covered_claim(
             coverage, cause, obs, base.sims, best.sims, noise_mv, floor_mv):

@@ -82,18 +82,19 @@ def _diagnose(setup, error_from_depth: float, end_padding: bool = False):
     return _decide(engine, params, [obs], [ref], reference, base, [best], run)
 
 
-def test_coverage_is_the_references_depth_in_the_reference_models_soc(setup):
+def test_coverage_is_the_charge_the_references_drew(setup):
     params, engine, soc0, capacity = setup
     ref = observe(_day(params, capacity, 0.45, 1)[0], params, fit_fraction=0.95)
     obs = observe(_day(params, capacity, 0.65, 2)[0], params, fit_fraction=0.6)
     reference = ReferenceFit(values={}, socs=[START_OCV_V], rmse_mV=4.0, initial_rmse_mV=50.0, evaluations=0,
                              skipped=[], seconds=0.0)
-    cov = reference_coverage(engine, params, [ref], reference, [obs], [soc0])
-    assert cov.reference_min_soc == pytest.approx(soc0 - 0.45, abs=1e-3)
+    cov = reference_coverage([ref], reference, [obs])
+    assert cov.reference_drawn_ah == pytest.approx(0.45 * capacity, rel=1e-3)
     assert cov.covered_until_s[0] == pytest.approx(0.45 / 0.65 * HOURS * 3600.0, abs=2 * DT_S)
     assert 0 < cov.covered_heldout_samples < cov.heldout_samples
-    # the same observed day, started 30 % SOC higher, never leaves the references' range
-    assert not reference_coverage(engine, params, [ref], reference, [obs], [soc0 + 0.3]).leaves_range
+    # a shallower observed day never leaves the references' range
+    shallow = observe(_day(params, capacity, 0.40, 3)[0], params, fit_fraction=0.6)
+    assert not reference_coverage([ref], reference, [shallow]).leaves_range
 
 
 def test_no_claim_from_an_error_only_deeper_than_the_references(setup):
