@@ -22,7 +22,11 @@ The guard (:func:`covered_claim`): a cause named from the whole held-out part is
 the same claim holds (:func:`~battery_predictor.diagnosis.decision.claim_allowed`, same noise and
 floor) on the held-out samples the references cover. A real change shows there too: capacity
 fade lowers the voltage at a given charge drawn and brings the knee forward into the covered
-range; a resistance, an offset, a temperature or a hysteresis act all day.
+range; a resistance, an offset or a hysteresis act all day. The one exception is a cause the
+measurements show directly: a measured temperature unlike the references' (the decision's
+``measured_first``) is a change whether or not the covered part shows it (on LFP the cold acts
+mostly near the knee); it is named with a caveat giving its gain on the covered part
+(:func:`measured_text`).
 """
 
 from __future__ import annotations
@@ -64,6 +68,10 @@ class Coverage:
         Held-out RMSE (mV) of the baseline and of ``cause`` on the covered held-out samples.
     refused : bool
         The claim of ``cause`` did not hold on the covered samples: ``none`` is named.
+    measured : bool
+        The claim did not hold on the covered samples but stands: the cause is measured (a
+        temperature unlike the references', :data:`~battery_predictor.diagnosis.decision.MEASURED_SHIFT_K`),
+        not inferred from the error alone (:func:`measured_text`).
     """
 
     reference_drawn_ah: float | None
@@ -75,6 +83,7 @@ class Coverage:
     baseline_rmse_mV: float | None = None
     cause_rmse_mV: float | None = None
     refused: bool = False
+    measured: bool = False
 
     @property
     def leaves_range(self) -> bool:
@@ -86,7 +95,7 @@ class Coverage:
                 "covered_until_s": [u if math.isfinite(u) else None for u in self.covered_until_s],
                 "heldout_samples": self.heldout_samples, "covered_heldout_samples": self.covered_heldout_samples,
                 "cause": self.cause, "baseline_rmse_mV": self.baseline_rmse_mV, "cause_rmse_mV": self.cause_rmse_mV,
-                "refused": self.refused}
+                "refused": self.refused, "kept_as_measured": self.measured}
 
 
 def first_time_beyond(obs: Observed, drawn_ah: float | None) -> float:
@@ -171,3 +180,21 @@ def refusal_text(coverage: Coverage, cause: str, whole_gain_pct: float) -> str:
                  "by the same rule. ")
     return text + ("To judge the deeper part, fit the reference on a recording that goes at least as deep "
                    "(ideally one that ends at its cut-off) and diagnose again.")
+
+
+def measured_text(coverage: Coverage, cause: str, shift_k: float | None) -> str:
+    """The caveat of a measured cause kept although its claim does not hold on the covered samples."""
+    starts = [u for u in coverage.covered_until_s if math.isfinite(u)]
+    where = f" from {min(starts) / 3600.0:.2f} h on" if starts else ""
+    shift = f"{abs(shift_k):.0f} K" if shift_k is not None else "a measured shift"
+    text = (f"Caveat: the observed data go deeper than the reference recordings did{where}, where the reference "
+            f"model extrapolates; {cause} is named because the measured temperature differs from the references' by "
+            f"{shift}, ")
+    b, c = coverage.baseline_rmse_mV, coverage.cause_rmse_mV
+    if coverage.covered_heldout_samples and b is not None and c is not None and b > 0:
+        text += (f"but within the references' depth ({coverage.covered_heldout_samples} of {coverage.heldout_samples} "
+                 f"held-out samples) it cuts the error only from {b:.1f} to {c:.1f} mV ({100.0 * (b - c) / b:+.1f} %): "
+                 "part of the gain may be the reference model's extrapolation.")
+    else:
+        text += "but no held-out sample lies within the references' depth: the gain may be the reference model's extrapolation."
+    return text

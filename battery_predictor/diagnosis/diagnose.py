@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from battery_predictor.diagnosis.candidates import CANDIDATES, Baseline, Candidate
-from battery_predictor.diagnosis.coverage import covered_claim, reference_coverage, refusal_text
+from battery_predictor.diagnosis.coverage import covered_claim, measured_text, reference_coverage, refusal_text
 from battery_predictor.diagnosis.decision import (
     GAIN_THRESHOLD_PCT,
     MEASURED_SHIFT_K,
@@ -556,15 +556,21 @@ def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[
         cause, extended, gain = best.cause, best, best.gain_pct
     # the claim must hold where the references were (mod:`coverage`): not only beyond their depth
     coverage = reference_coverage(refs, reference, obs) if reference is not None and refs else None
-    refusal = None
+    refusal = caveat = None
     if cause != "none" and best is not None and coverage is not None and not covered_claim(
             coverage, cause, obs, base.sims, best.sims, noise_mv, floor_mv):
-        refusal = refusal_text(coverage, cause, gain)
-        cause, extended, gain = "none", base, 0.0
+        if cause in measured_first:  # the change is measured, not inferred from the error beyond the references
+            coverage.refused, coverage.measured = False, True
+            caveat = measured_text(coverage, cause, shift_k)
+        else:
+            refusal = refusal_text(coverage, cause, gain)
+            cause, extended, gain = "none", base, 0.0
     close = []
     if cause != "none":
         close = [r.cause for r in near_lowest(valid, noise_mv) if r is not best and r.gain_pct >= GAIN_THRESHOLD_PCT]
     evidence = evidence_text(cause, base, best, results, analysis, noise_mv, close, floor_mv, shift_k, refusal)
+    if caveat:
+        evidence += " " + caveat
     return Diagnosis(cause=cause, evidence=evidence, baseline=base, extended=extended, gain_pct=gain,
                      candidates=results, residuals=analysis, noise_mV=noise_mv, params=params, observed=obs,
                      reference=reference, separable_with=close, temperature_shift_k=shift_k, coverage=coverage,

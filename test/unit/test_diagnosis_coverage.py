@@ -34,7 +34,7 @@ def setup():
     return params, engine, soc0, capacity
 
 
-def _day(params, capacity_ah: float, drawn_fraction: float, seed: int):
+def _day(params, capacity_ah: float, drawn_fraction: float, seed: int, temperature_k: float | None = None):
     """A constant-current day drawing ``drawn_fraction`` of the model's capacity; a smooth voltage plus noise."""
     t = np.arange(0.0, HOURS * 3600.0 + DT_S, DT_S)
     current = drawn_fraction * capacity_ah / HOURS
@@ -42,7 +42,8 @@ def _day(params, capacity_ah: float, drawn_fraction: float, seed: int):
     v_true = params.series * (START_OCV_V - 0.6 * depth)
     rng = np.random.default_rng(seed)
     v = v_true + rng.normal(0.0, NOISE_V, t.size)
-    return Recording(t, v, np.full(t.size, current), None), v_true, depth
+    temp = None if temperature_k is None else np.full(t.size, temperature_k)
+    return Recording(t, v, np.full(t.size, current), temp), v_true, depth
 
 
 def _result(cause: str, obs, sim: SimOut, soc0: float, base_rmse_mv: float | None = None) -> CandidateResult:
@@ -59,14 +60,16 @@ def _sim(t: np.ndarray, v: np.ndarray) -> SimOut:
     return SimOut(t=t, v_pack=v, v_cell_min=v / 4.0, reached_cutoff=False, end_time_s=float(t[-1]))
 
 
-def _diagnose(setup, error_from_depth: float, end_padding: bool = False):
+def _diagnose(setup, error_from_depth: float, end_padding: bool = False, cause: str = "capacity_fade",
+              observed_k: float | None = None):
     """Reference day draws 45 % of the capacity, observed day 65 %; the baseline's error grows from ``error_from_depth``.
 
-    The candidate ``capacity_fade`` predicts the observed day exactly (within the noise).
+    The candidate ``cause`` predicts the observed day exactly (within the noise). ``observed_k``: the
+    observed day's measured temperature (K; the reference's is 298.15 K), else none is measured.
     """
     params, engine, soc0, capacity = setup
-    ref_rec, _, _ = _day(params, capacity, 0.45, seed=1)
-    obs_rec, v_true, depth = _day(params, capacity, 0.65, seed=2)
+    ref_rec, _, _ = _day(params, capacity, 0.45, seed=1, temperature_k=None if observed_k is None else 298.15)
+    obs_rec, v_true, depth = _day(params, capacity, 0.65, seed=2, temperature_k=observed_k)
     ref = observe(ref_rec, params, fit_fraction=0.95)
     if end_padding:
         ref = replace(ref, ends_at_cutoff=True)
@@ -75,7 +78,7 @@ def _diagnose(setup, error_from_depth: float, end_padding: bool = False):
     over = np.clip((depth - error_from_depth) / (0.65 - error_from_depth), 0.0, None)
     base_v = v_true + params.series * 0.25 * over ** 2
     base = _result("none", obs, _sim(obs.t, base_v), soc0)
-    best = _result("capacity_fade", obs, _sim(obs.t, v_true.copy()), soc0, base.heldout_rmse_mV)
+    best = _result(cause, obs, _sim(obs.t, v_true.copy()), soc0, base.heldout_rmse_mV)
     reference = ReferenceFit(values={}, socs=[START_OCV_V], rmse_mV=4.0, initial_rmse_mV=50.0, evaluations=0,
                              skipped=[], seconds=0.0, end_padding=end_padding)
     run = dict(seconds=0.0, budget=2, fit_fraction=0.6, split="time")
@@ -118,3 +121,14 @@ def test_a_reference_that_stopped_at_its_cutoff_covers_every_depth(setup):
     diag = _diagnose(setup, error_from_depth=0.5, end_padding=True)
     assert diag.coverage is not None and not diag.coverage.leaves_range
     assert diag.cause == "capacity_fade"
+
+
+def test_a_measured_temperature_change_is_named_with_a_caveat(setup):
+    # the same deep-only error, but the observed day is measured 20 K colder than the reference: the
+    # change is measured, so temperature is named; the caveat gives its gain within the references' depth
+    diag = _diagnose(setup, error_from_depth=0.5, cause="temperature", observed_k=278.15)
+    assert diag.cause == "temperature" and diag.coverage is not None and diag.coverage.measured
+    assert "Caveat: the observed data go deeper" in diag.evidence
+    # without a measured shift the same candidate is refused like any hidden cause
+    same_k = _diagnose(setup, error_from_depth=0.5, cause="temperature", observed_k=298.15)
+    assert same_k.cause == "none" and same_k.coverage is not None and same_k.coverage.refused
