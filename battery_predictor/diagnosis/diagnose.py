@@ -32,8 +32,10 @@
 4. **Judged on held-out data.** Each fitted model simulates the whole recording; only the
    held-out part is scored (RMSE with the padding of R2_mod Eq. 1-2, R2_mod, runtime error),
    so a candidate wins only by predicting better, not by having more knobs.
-5. **Decision.** :mod:`battery_predictor.diagnosis.decision` (the thresholds and the rule);
-   the result types are :mod:`battery_predictor.diagnosis.results`.
+5. **Decision.** :mod:`battery_predictor.diagnosis.decision` (the thresholds and the rule); a
+   claim must also hold on the held-out samples no deeper than the references went
+   (:mod:`battery_predictor.diagnosis.coverage`); the result types are
+   :mod:`battery_predictor.diagnosis.results`.
 """
 
 from __future__ import annotations
