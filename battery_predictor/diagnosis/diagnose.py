@@ -32,8 +32,10 @@
 4. **Judged on held-out data.** Each fitted model simulates the whole recording; only the
    held-out part is scored (RMSE with the padding of R2_mod Eq. 1-2, R2_mod, runtime error),
    so a candidate wins only by predicting better, not by having more knobs.
-5. **Decision.** :mod:`battery_predictor.diagnosis.decision` (the thresholds and the rule);
-   the result types are :mod:`battery_predictor.diagnosis.results`.
+5. **Decision.** :mod:`battery_predictor.diagnosis.decision` (the thresholds and the rule); a
+   claim must also hold on the held-out samples no deeper than the references went
+   (:mod:`battery_predictor.diagnosis.coverage`); the result types are
+   :mod:`battery_predictor.diagnosis.results`.
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from battery_predictor.diagnosis.candidates import CANDIDATES, Baseline, Candidate
+from battery_predictor.diagnosis.coverage import covered_claim, measured_text, reference_coverage, refusal_text
 from battery_predictor.diagnosis.decision import (
     GAIN_THRESHOLD_PCT,
     MEASURED_SHIFT_K,
@@ -553,13 +556,27 @@ def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[
     floor_mv = max(noise_mv, reference.rmse_mV if reference is not None else 0.0)
     if best is not None and claim_allowed(base.heldout_rmse_mV, best.heldout_rmse_mV, noise_mv, floor_mv):
         cause, extended, gain = best.cause, best, best.gain_pct
+    # the claim must hold where the references were (mod:`coverage`): not only beyond their depth
+    coverage = reference_coverage(refs, reference, obs) if reference is not None and refs else None
+    refusal = caveat = None
+    if cause != "none" and best is not None and coverage is not None and not covered_claim(
+            coverage, cause, obs, base.sims, best.sims, noise_mv, floor_mv):
+        if cause in measured_first:  # the change is measured, not inferred from the error beyond the references
+            coverage.refused, coverage.measured = False, True
+            caveat = measured_text(coverage, cause, shift_k)
+        else:
+            refusal = refusal_text(coverage, cause, gain)
+            cause, extended, gain = "none", base, 0.0
     close = []
     if cause != "none":
         close = [r.cause for r in near_lowest(valid, noise_mv) if r is not best and r.gain_pct >= GAIN_THRESHOLD_PCT]
-    evidence = evidence_text(cause, base, best, results, analysis, noise_mv, close, floor_mv, shift_k)
+    evidence = evidence_text(cause, base, best, results, analysis, noise_mv, close, floor_mv, shift_k, refusal)
+    if caveat:
+        evidence += " " + caveat
     return Diagnosis(cause=cause, evidence=evidence, baseline=base, extended=extended, gain_pct=gain,
                      candidates=results, residuals=analysis, noise_mV=noise_mv, params=params, observed=obs,
-                     reference=reference, separable_with=close, temperature_shift_k=shift_k, **run)
+                     reference=reference, separable_with=close, temperature_shift_k=shift_k, coverage=coverage,
+                     **run)
 
 
 def not_judged(params: PackParams, obs: Sequence[Observed], reference: ReferenceFit, reason: str, budget: int,

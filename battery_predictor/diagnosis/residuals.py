@@ -191,13 +191,16 @@ CAPACITY_LIKE = ("current_offset", "capacity_fade")
 
 def evidence_text(cause: str, base: CandidateResult, best: CandidateResult | None, results: Sequence[CandidateResult],
                   analysis: ResidualAnalysis, noise_mv: float,
-                  close: list[str], floor_mv: float | None = None, temperature_shift_k: float | None = None) -> str:
+                  close: list[str], floor_mv: float | None = None, temperature_shift_k: float | None = None,
+                  refusal: str | None = None) -> str:
     """One paragraph: the baseline's error, the residual features that carry it, the verdict.
 
     ``temperature_shift_k`` (observed minus reference mean measured temperature): when it exceeds
     :data:`TEMPERATURE_CAVEAT_K` and the named cause is capacity-like (:data:`CAPACITY_LIKE`), the text
     says that the held-out comparison cannot tell that cause from a loss of accessible capacity with
     temperature. The caveat does not change the verdict, which rests on held-out prediction alone.
+    ``refusal``: with cause ``none``, why a claim the held-out part would make was not made (the
+    observed data go deeper than the references, :func:`~battery_predictor.diagnosis.coverage.refusal_text`).
     """
     parts = [f"Baseline held-out RMSE {base.heldout_rmse_mV:.1f} mV (voltage noise {noise_mv:.1f} mV)."]
     ranked = [(f, e) for f, e in analysis.ranked() if e >= 0.05][:3]
@@ -209,6 +212,9 @@ def evidence_text(cause: str, base: CandidateResult, best: CandidateResult | Non
     pairs = [f"{_LABELS[a]} and {_LABELS[b]}" for a, b in analysis.collinear if "direction" not in (a, b)]
     if pairs:
         parts.append("Not separable in these recordings (they move together): " + "; ".join(pairs) + ".")
+    if cause == "none" and refusal:
+        parts.append(refusal)
+        return " ".join(parts)
     if cause == "none":
         floor = noise_mv if floor_mv is None else floor_mv
         if base.heldout_rmse_mV <= BASELINE_FLOOR_FACTOR * floor:

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from battery_predictor.diagnosis.candidates import candidate
+from battery_predictor.diagnosis.coverage import Coverage
 from battery_predictor.diagnosis.engine import Engine, Observed, SimOut
 from battery_predictor.diagnosis.reference import ReferenceFit
 from battery_predictor.diagnosis.residuals import ResidualAnalysis
@@ -79,6 +80,9 @@ class Diagnosis:
     temperature_shift_k: float | None = None
     #: False when the reference fit was too poor to judge candidates (``cause == NOT_JUDGED``).
     judged: bool = True
+    #: The observed recordings' depth against the references' and the claim on the covered part
+    #: (:mod:`~battery_predictor.diagnosis.coverage`); None without references.
+    coverage: Coverage | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -97,6 +101,7 @@ class Diagnosis:
             "fit_fraction": self.fit_fraction,
             "split": self.split,
             "temperature_shift_k": self.temperature_shift_k,
+            "reference_coverage": None if self.coverage is None else self.coverage.to_json(),
             "seconds": self.seconds,
         }
 

@@ -73,8 +73,8 @@ def first_time_below(t: np.ndarray, v: np.ndarray, threshold: float) -> float | 
     return float(t[i - 1] + frac * (t[i] - t[i - 1]))
 
 
-def held_out_score(obs: Observed, sim: SimOut) -> HeldOut:
-    """Score the held-out part (``t > t_split``).
+def held_out_score(obs: Observed, sim: SimOut, until_s: float = math.inf) -> HeldOut:
+    """Score the held-out part (``t > t_split``); the squared errors only before ``until_s`` (s).
 
     RMSE: the prediction is padded with the held-out minimum voltage after it ended (a model that
     stops early is not rewarded) and, when it runs past the recording, the measurement is extended
@@ -83,6 +83,9 @@ def held_out_score(obs: Observed, sim: SimOut) -> HeldOut:
     measured minimum on a current spike *before* the recording's end is not cut there: under a
     dynamic load such a dip says nothing about the end of the discharge, and cutting it would
     score an otherwise exact prediction as if it had stopped. R2_mod is the seed paper's, as defined.
+    ``until_s`` restricts ``sq_err_sum`` and ``n`` to the aligned samples before that time (the part of
+    the day the references cover, :mod:`battery_predictor.diagnosis.coverage`); R2_mod and the runtime
+    error are those of the whole held-out part.
     """
     from battery_predictor.fitting.cost import r2_mod
 
@@ -106,7 +109,7 @@ def held_out_score(obs: Observed, sim: SimOut) -> HeldOut:
         pred[grid > tp[-1] + 1e-6] = u_min
     else:
         pred = np.full(grid.size, u_min)
-    err = meas - pred
+    err = (meas - pred)[grid < until_s]
     ss_res = float(err @ err)
     r2 = r2_mod(t_h, v_h, sim.t[keep], sim.v_pack[keep]) if t_h.size else float("nan")
     runtime = None
