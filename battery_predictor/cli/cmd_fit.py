@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from battery_predictor.cli.common import (
     add_data_arguments,
+    add_resample_arguments,
     check_output_file,
     check_plot_file,
     engine_fallback,
@@ -57,11 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="identify: fit the pack voltage only, also when the data carry series-group voltages "
                         "(group<k>_voltage_V) and the params use cell_imbalance (default: the weakest group's "
                         "voltage is fitted too)")
-    p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
-                   help="average the data over windows of this many seconds first (default: data sampled faster "
-                        "than the battery monitor's 5 s window are averaged over it, as the predictor nodes see them)")
-    p.add_argument("--no-resample", action="store_true",
-                   help="fit the samples as measured, also when they are denser than the monitor's window")
+    add_resample_arguments(p, "fit")
     p.add_argument("--trials", type=int, default=None, help="tpe: total TPE trials (default 1000)")
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
     p.add_argument("--storage", default=None,

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 from battery_predictor.cli.common import (
     add_data_arguments,
+    add_resample_arguments,
     check_plot_file,
     engine_fallback,
     prepared_data,
@@ -36,11 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto",
                    help="initial state: params' concentrations or first measured voltage (default auto); a first "
                         "voltage under load is corrected by the model's own drop at that current")
-    p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
-                   help="average the data over windows of this many seconds first (default: data sampled faster "
-                        "than the battery monitor's 5 s window are averaged over it, as fit does by default)")
-    p.add_argument("--no-resample", action="store_true",
-                   help="simulate and score the samples as measured, also when they are denser than the monitor's window")
+    add_resample_arguments(p, "simulate")
     p.add_argument("--plot", default=None, help="write measured vs simulated voltage to this PNG")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)

@@ -84,6 +84,16 @@ def data_options(args: argparse.Namespace) -> dict[str, Any]:
             "expect_discharge": args.expect_discharge}
 
 
+def add_resample_arguments(parser: argparse.ArgumentParser, command: str) -> None:
+    """``--resample SECONDS`` and ``--no-resample`` of ``fit`` and ``simulate`` (see :func:`prepared_data`)."""
+    parser.add_argument("--resample", type=float, default=None, metavar="SECONDS",
+                        help="average the data over windows of this many seconds first (default: data sampled faster "
+                             "than the battery monitor's 5 s window are averaged over it, as the predictor nodes see "
+                             "them)")
+    parser.add_argument("--no-resample", action="store_true",
+                        help=f"{command} the samples as measured, also when they are denser than the monitor's window")
+
+
 def prepared_data(args: argparse.Namespace, params: PackParams, *, command: str) -> list[Recording]:
     """``fit``'s and ``simulate``'s recordings, prepared alike.
 
