@@ -227,9 +227,7 @@ class EnginePack:
         temperatures = np.full(self._heights.size, float(cell_temperature_k))
         if isinstance(start, EngineState):
             return replace(start, cell_temperature_k=temperatures)
-        c_n, c_p = self.concentrations(float(start))  # as run_cells makes uniform particles of them
-        y_n = np.full(self.model.blocks[0].b_vector_per_a_s.size, c_n / self.model.blocks[0].scale_mol_m3)
-        y_p = np.full(self.model.blocks[1].b_vector_per_a_s.size, c_p / self.model.blocks[1].scale_mol_m3)
+        y_n, y_p = self.model.initial_state(*self.concentrations(float(start)))
         weak = (y_n.copy(), y_p.copy()) if self._heights.size > 1 else None
         return EngineState(particles=(y_n, y_p), soc_start=float(start), charge_ah=0.0, weak_particles=weak,
                            cell_temperature_k=temperatures)
