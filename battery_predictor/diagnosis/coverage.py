@@ -160,12 +160,17 @@ def covered_claim(coverage: Coverage, cause: str, observed: Sequence[Observed], 
     return not coverage.refused
 
 
+def _deeper_from(coverage: Coverage) -> str:
+    """`` from H h on``: when the first observed recording leaves the references' depth ("" when none does)."""
+    starts = [u for u in coverage.covered_until_s if math.isfinite(u)]
+    return f" from {min(starts) / 3600.0:.2f} h on" if starts else ""
+
+
 def refusal_text(coverage: Coverage, cause: str, whole_gain_pct: float) -> str:
     """The evidence sentence of a claim refused because it rests on depths no reference reached."""
     ref = coverage.reference_drawn_ah if coverage.reference_drawn_ah is not None else float("nan")
     deepest = max(coverage.observed_drawn_ah) if coverage.observed_drawn_ah else float("nan")
-    starts = [u for u in coverage.covered_until_s if math.isfinite(u)]
-    where = f" from {min(starts) / 3600.0:.2f} h on" if starts else ""
+    where = _deeper_from(coverage)
     text = (f"No claim: the observed data go deeper than the reference recordings did{where} (up to "
             f"{deepest:.2f} Ah drawn since their start; the references drew at most {ref:.2f} Ah), where "
             f"the reference model extrapolates (e.g. where the end-of-discharge knee lies). {cause} cuts the "
@@ -184,8 +189,7 @@ def refusal_text(coverage: Coverage, cause: str, whole_gain_pct: float) -> str:
 
 def measured_text(coverage: Coverage, cause: str, shift_k: float | None) -> str:
     """The caveat of a measured cause kept although its claim does not hold on the covered samples."""
-    starts = [u for u in coverage.covered_until_s if math.isfinite(u)]
-    where = f" from {min(starts) / 3600.0:.2f} h on" if starts else ""
+    where = _deeper_from(coverage)
     shift = f"{abs(shift_k):.0f} K" if shift_k is not None else "a measured shift"
     text = (f"Caveat: the observed data go deeper than the reference recordings did{where}, where the reference "
             f"model extrapolates; {cause} is named because the measured temperature differs from the references' by "
