@@ -7,6 +7,13 @@ reflective least-squares refinement (``scipy.optimize.least_squares``, finite-di
 Jacobian) on the residual vector whose sum of squares is ``1 - mean R2_mod``. Budgets count
 model evaluations (one evaluation simulates every recording once); every evaluation, also
 those of the Jacobians, counts.
+
+Data sampled faster than :data:`COARSE_WINDOW_S` are searched in two stages: the search above on
+the data averaged over those windows, then one refinement of its result on the data as given.
+The coarse stage sees the charge-driven shape that sets the identifiable coordinates without the
+sample-to-sample detail of the end of a discharge, where the cost of the data as given is a narrow
+curved valley (the model's end of discharge against the recording's, a few samples wide) that a
+refinement follows only slowly; each coarse evaluation is also cheaper.
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ import math
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -23,6 +30,7 @@ import numpy as np
 from battery_predictor.errors import BatteryPredictorError, SimulationError
 from battery_predictor.fitting.cost import r2_mod, rmse_v
 from battery_predictor.fitting.identifiable import Coordinate, electrode_basis, pybamm_values
+from battery_predictor.fitting.resample import resample_windows
 from battery_predictor.params import PackParams
 from battery_predictor.recording import Recording, ends_at_cutoff
 from battery_predictor.simulation.base import PackSimResult, PackSimulator
@@ -52,6 +60,11 @@ MIN_LEFTOVER_JACOBIANS = 3
 DISTINCT_UNIT_DISTANCE = 0.25
 #: Finite-difference step on the unit cube.
 FD_STEP = 2e-3
+#: The first stage searches the data averaged over windows of this length (s) when every recording is
+#: sampled at least three times per window (:func:`identify`).
+COARSE_WINDOW_S = 30.0
+#: Share of the budget for the second stage: the refinement on the data as given.
+FINE_FRACTION = 0.25
 
 
 class BudgetExhausted(BatteryPredictorError):
@@ -520,22 +533,43 @@ def select_by_r2_mod(problem: IdentificationProblem, ends: Sequence[tuple[float,
     return best[1], best[2]
 
 
+def coarsened(problem: IdentificationProblem, window_s: float = COARSE_WINDOW_S) -> IdentificationProblem | None:
+    """``problem`` on its recordings averaged over ``window_s`` windows, or None when one is sampled too sparsely.
+
+    Every recording needs a median sampling interval of at most a third of the window (s), so that
+    each window averages several samples.
+    """
+    if not (math.isfinite(window_s) and window_s > 0):
+        return None
+    for rec in problem.recordings:
+        t = np.asarray(rec.time_s, dtype=float)
+        if t.size < 2 or 3.0 * float(np.median(np.diff(t))) > window_s:
+            return None
+    return replace(problem, recordings=[resample_windows(r, window_s) for r in problem.recordings])
+
+
 def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: int = 0,
              tpe_fraction: float = DEFAULT_TPE_FRACTION, starts: int = DEFAULT_STARTS,
              startup_per_coordinate: int = STARTUP_TRIALS_PER_COORDINATE,
-             progress: Callable[[str, int, float], None] | None = None) -> IdentificationResult:
+             progress: Callable[[str, int, float], None] | None = None,
+             coarse_window_s: float | None = COARSE_WINDOW_S, fine_fraction: float = FINE_FRACTION) -> IdentificationResult:
     """Seeded TPE then multi-start trust-region least squares, within ``evaluations`` model runs.
+
+    With ``coarse_window_s`` and data sampled at least three times per window, the search runs on
+    the data averaged over those windows (:func:`coarsened`) with ``1 - fine_fraction`` of the
+    budget, and its result is refined on the data as given with the rest; otherwise on the data
+    as given only. The returned cost is the data-as-given cost.
 
     Parameters
     ----------
     problem : IdentificationProblem
         What to fit.
     evaluations : int
-        Budget in model evaluations (each simulates every recording once).
+        Budget in model evaluations (each simulates every recording once; a coarse one counts as one).
     seed : int
         TPE sampler seed (the refinement is deterministic).
     tpe_fraction : float
-        Share of the budget for TPE (0 = refinement from the start point only).
+        Share of the (first stage's) budget for TPE (0 = refinement from the start point only).
     starts : int
         Refinements planned from the best distinct TPE candidates (the start point counts as a
         candidate); budget they leave unspent refines further distinct candidates.
@@ -543,7 +577,44 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
         Random TPE start-up trials per coordinate (capped at 30 % of the TPE trials).
     progress : callable, optional
         Called as ``progress(phase, evaluations, best_cost)`` after each phase.
+    coarse_window_s : float or None
+        Window (s) of the first stage; None: one stage on the data as given.
+    fine_fraction : float
+        Share of the budget for the refinement on the data as given, in (0, 1).
     """
+    if evaluations < 2:
+        raise BatteryPredictorError(f"--evaluations must be >= 2, got {evaluations}")
+    coarse = coarsened(problem, coarse_window_s) if coarse_window_s else None
+    n_fine = int(round(fine_fraction * evaluations))
+    if coarse is None or not 0.0 < fine_fraction < 1.0 or evaluations - n_fine < 2 or n_fine < 2:
+        return _identify_one_stage(problem, evaluations=evaluations, seed=seed, tpe_fraction=tpe_fraction,
+                                   starts=starts, startup_per_coordinate=startup_per_coordinate, progress=progress)
+    label = f"{coarse_window_s:g} s windows: "
+
+    def coarse_progress(phase: str, count: int, cost: float) -> None:
+        if progress is not None:
+            progress(label + phase, count, cost)
+
+    first = _identify_one_stage(coarse, evaluations=evaluations - n_fine, seed=seed, tpe_fraction=tpe_fraction,
+                                starts=starts, startup_per_coordinate=startup_per_coordinate,
+                                progress=coarse_progress)
+    tic = time.perf_counter()
+    log = EvaluationLog(budget=n_fine)
+    cost, best = _refine(_cost_function(problem, log), first.unit, max_evaluations=n_fine)
+    history = [(label + phase, count, c) for phase, count, c in first.history]
+    history.append(("refine on the data as given", first.evaluations + log.count, cost))
+    if progress is not None:
+        progress(*history[-1])
+    return IdentificationResult(coordinates=problem.coordinates(best), unit=best, cost=cost,
+                                evaluations=first.evaluations + log.count, tpe_evaluations=first.tpe_evaluations,
+                                starts=first.starts + 1, seconds=first.seconds + time.perf_counter() - tic,
+                                history=history, model_seconds=first.model_seconds + log.model_seconds)
+
+
+def _identify_one_stage(problem: IdentificationProblem, *, evaluations: int, seed: int, tpe_fraction: float,
+                        starts: int, startup_per_coordinate: int,
+                        progress: Callable[[str, int, float], None] | None) -> IdentificationResult:
+    """Seeded TPE then multi-start trust-region least squares on ``problem``'s data as given (see :func:`identify`)."""
     if evaluations < 2:
         raise BatteryPredictorError(f"--evaluations must be >= 2, got {evaluations}")
     if not 0.0 <= tpe_fraction < 1.0:

@@ -22,6 +22,7 @@ from battery_predictor.fitting.identification import (
     CandidateScore,
     IdentificationProblem,
     ResidualGrid,
+    coarsened,
     distinct_best,
     identifiability_of,
     identify,
@@ -194,15 +195,15 @@ def test_identifiability_flags_compensating_parameters_and_keeps_independent_one
     assert abs(weakest["p"]) == pytest.approx(abs(weakest["q"]), rel=1e-6) and abs(weakest["s"]) < 1e-6
 
 
-def _synthetic_recording(params, coordinates, seed: int) -> Recording:
-    """A 1 h pulsed discharge of ``params`` at ``coordinates`` with 2 mV noise, 20 s samples."""
+def _synthetic_recording(params, coordinates, seed: int, sample_s: float = 20.0) -> Recording:
+    """A 1 h pulsed discharge of ``params`` at ``coordinates`` with 2 mV noise, ``sample_s`` samples."""
     rng = np.random.default_rng(seed)
     durations = rng.uniform(60.0, 240.0, 30)
     currents = rng.uniform(0.5, 6.0, 30)
     load = StepLoad.from_durations(durations, currents)
     values = pybamm_values(params, coordinates)[0]
     truth = params.with_values(values)
-    t_out = np.arange(0.0, load.end_s, 20.0)
+    t_out = np.arange(0.0, load.end_s, sample_s)
     res = get_simulator("fast").simulate(truth, SimulationRequest(load=load, output_time_s=t_out))
     v = res.pack_voltage_v + rng.normal(0.0, 0.002, res.time_s.size)
     return Recording(res.time_s, v, load.current_at(res.time_s), source=f"synthetic-{seed}")
@@ -236,6 +237,29 @@ def test_identify_spends_at_most_its_budget_and_improves_on_a_far_start(panasoni
     assert [h[0] for h in result.history][0] == "tpe"
     assert 0.0 < result.model_seconds <= result.seconds
     assert result.optimiser_seconds == pytest.approx(result.seconds - result.model_seconds)
+
+
+def test_dense_recordings_are_searched_on_window_averages_first_and_sparse_ones_as_given(panasonic):
+    truth = _far_truth(panasonic)
+    dense = _problem(panasonic, _synthetic_recording(panasonic, truth, seed=3, sample_s=5.0))
+    coarse = coarsened(dense, 30.0)
+    assert coarse is not None
+    (rec,), (avg,) = dense.recordings, coarse.recordings
+    assert avg.time_s.size < rec.time_s.size / 5
+    assert coarsened(dense, 12.0) is None  # fewer than three samples per window
+    assert coarsened(_problem(panasonic, _synthetic_recording(panasonic, truth, seed=3)), 30.0) is None
+
+
+def test_two_stage_identification_keeps_its_budget_and_reports_the_cost_on_the_data_as_given(panasonic):
+    problem = _problem(panasonic, _synthetic_recording(panasonic, _far_truth(panasonic), seed=3, sample_s=5.0))
+    result = identify(problem, evaluations=60, seed=0, starts=1)
+    assert result.evaluations <= 60
+    phases = [h[0] for h in result.history]
+    assert phases[0] == "30 s windows: tpe" and phases[-1] == "refine on the data as given"
+    at_end = problem.residuals(result.coordinates)
+    assert result.cost == pytest.approx(float(at_end @ at_end))
+    one_stage = identify(problem, evaluations=60, seed=0, starts=1, coarse_window_s=None)
+    assert [h[0] for h in one_stage.history][0] == "tpe"
 
 
 def test_refinement_near_the_truth_converges_to_it_and_reports_the_positive_electrode_determined(panasonic):
@@ -447,7 +471,7 @@ def test_extra_refinements_keep_the_budget_including_the_scoring_of_every_end_po
     extra = 0
     for budget in range(20, 80, 3):
         Quadratic.runs = 0
-        result = identify(problem, evaluations=budget, seed=0, starts=1)
+        result = identify(problem, evaluations=budget, seed=0, starts=1, coarse_window_s=None)
         extra += result.starts > 1
         assert Quadratic.runs == result.evaluations <= budget
         np.testing.assert_allclose(result.unit, target, atol=1e-4)
