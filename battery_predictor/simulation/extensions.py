@@ -439,8 +439,7 @@ def arrhenius_ratio(activation_j_mol: Any, temperature_k: Any, anchor_k: Any = C
 
     if any(isinstance(x, pybamm.Symbol) for x in (activation_j_mol, temperature_k, anchor_k)):
         return pybamm.exp(activation_j_mol / R_GAS * (1.0 / temperature_k - 1.0 / anchor_k))
-    t = np.asarray(temperature_k, dtype=float)
-    return np.exp(float(activation_j_mol) / R_GAS * (1.0 / t - 1.0 / float(anchor_k)))
+    return arrhenius_factor(temperature_k, float(activation_j_mol), float(anchor_k))
 
 
 def charge_transfer_shape(sto: Any) -> Any:
