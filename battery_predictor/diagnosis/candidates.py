@@ -153,12 +153,17 @@ class Temperature(Candidate):
       The extension also offers a positive-particle activation energy that grows towards full
       lithiation (``EA_POS_FULL``); fitted here it extrapolated badly on held-out data
       (docs/findings.md), so the candidate does not fit it.
-    * **Ohmic transport and kinetics**: the cell resistance the SPM lacks (electrolyte, SEI), Arrhenius
-      with 30 kJ/mol; only its excess over the anchor temperature is added (the identified model already
-      carries the reference cells' drop), so it grows in the cold and shrinks as the cell warms. Its one
-      fitted value is the resistance at the anchor. The exchange-current densities keep the base set's
-      own Arrhenius factor (an extra activation energy, ``EA_KINETICS``, fitted to ~0 on the Panasonic
-      cell, docs/findings.md).
+    * **Charge transfer**: a cell resistance that follows Arrhenius with 30 kJ/mol and the inverse of the
+      exchange-current density's concentration dependence at the negative electrode's surface
+      (``j0 ~ sqrt(x (1 - x))``, at the stoichiometry the cold window moves it to;
+      :func:`~battery_predictor.simulation.extensions.charge_transfer_excess_ohm`), in PyBaMM's voltage. Only
+      its excess over the anchor temperature is added (the identified model already carries the reference
+      cells' drop), so it grows in the cold, most towards the end of the discharge, and shrinks as the cell
+      warms (measured cold cells: docs/findings.md). Its one fitted value is the resistance at the anchor and
+      half lithiation. The exchange-current densities keep the base set's own Arrhenius factor (an extra
+      activation energy, ``EA_KINETICS``, fitted to ~0 on the Panasonic cell, docs/findings.md): under a
+      drive cycle's currents the SPM's Butler-Volmer kinetics act near their Tafel regime, where a slower
+      ``j0`` shifts the voltage rather than adding the resistance the measured cells show.
     * **Self-heating**: the cell follows its measured temperature; without one, a lumped thermal
       model from the first temperature with a fitted heat transfer coefficient.
 
@@ -173,7 +178,8 @@ class Temperature(Candidate):
     name = "temperature"
     title = ("both electrodes' stoichiometry windows narrowing below the references' end-of-discharge temperature "
              "(accessible capacity at any rate), Arrhenius "
-             "solid diffusion and Arrhenius cell resistance (fitted), the cell following its measured temperature "
+             "solid diffusion and an Arrhenius charge-transfer resistance that grows as the negative surface empties "
+             "(fitted), the cell following its measured temperature "
              "(or, unmeasured, a lumped thermal model with a fitted heat transfer coefficient: self-heating)")
     signature = ("temperature", "current")
 
@@ -183,7 +189,8 @@ class Temperature(Candidate):
 
     def parameters(self, params: PackParams, observed: Sequence[Observed] | None = None) -> tuple[CandParam, ...]:
         out = (CandParam("diffusivity_activation_energy_J_mol", 0.0, 80000.0, 25000.0, unit="J/mol"),
-               CandParam("cold_resistance_ohm", 1e-5, 0.2, 2e-3, log=True, unit="Ohm per cell at the anchor temperature"),
+               CandParam("charge_transfer_resistance_ohm", 1e-5, 0.2, 2e-3, log=True,
+                         unit="Ohm per cell at the anchor temperature and half lithiation"),
                CandParam("window_loss_per_k", 0.0, 0.02, 0.002, unit="1/K below the anchor temperature"))
         if observed is not None and all(self._measured(o) for o in observed):
             return out
@@ -193,7 +200,7 @@ class Temperature(Candidate):
         return self._with_extension(params, {ext.HEAT_TRANSFER: 10.0})
 
     def extra_inputs(self) -> tuple[str, ...]:
-        return (ext.EA_NEG, ext.EA_POS, ext.EA_POS_FULL, ext.COLD_WINDOW, ext.HEAT_TRANSFER)
+        return (ext.EA_NEG, ext.EA_POS, ext.EA_POS_FULL, ext.COLD_WINDOW, ext.COLD_CHARGE_TRANSFER, ext.HEAT_TRANSFER)
 
     def ambient_k(self, obs: Observed) -> float:
         return obs.first_temperature_k
@@ -202,23 +209,25 @@ class Temperature(Candidate):
         ea = theta["diffusivity_activation_energy_J_mol"]
         values = {ext.EA_NEG: ea, ext.EA_POS: ea,
                   ext.EA_POS_FULL: theta.get("full_lithiation_activation_energy_J_mol", 0.0),
-                  ext.COLD_WINDOW: theta.get("window_loss_per_k", 0.0)}
+                  ext.COLD_WINDOW: theta.get("window_loss_per_k", 0.0),
+                  ext.COLD_CHARGE_TRANSFER: theta["charge_transfer_resistance_ohm"]}
         if "heat_transfer_coefficient_W_m2K" in theta:
             values[ext.HEAT_TRANSFER] = theta["heat_transfer_coefficient_W_m2K"]
-        return {"values": values, "post": Post(cold_resistance_ohm=theta["cold_resistance_ohm"],
-                                               anchor_k=ext.extension_value(params, ext.ANCHOR_TEMPERATURE))}
+        return {"values": values}
 
     def simulate(self, engine: Engine, params: PackParams, obs: Observed, theta: dict[str, float], soc: float,
                  t_end: float | None = None, want_temperature: bool = False) -> SimOut:
         measured = self._measured(obs)
         args = self.run_arguments(params, theta)
-        struct = replace(params, extensions=tuple(dict.fromkeys([*params.extensions, self.name])))
+        # the model with the charge-transfer term (its value is an input of the build)
+        struct = self._with_extension(params, {ext.COLD_CHARGE_TRANSFER: 1e-3})
         if not measured:  # self-heating: the lumped thermal model from the params' ambient temperature
-            struct = self.structure(params)
+            struct = self._with_extension(struct, {ext.HEAT_TRANSFER: 10.0})
             args["values"].setdefault(ext.HEAT_TRANSFER, 10.0)
         else:
             args["values"].pop(ext.HEAT_TRANSFER, None)
-        inputs = (ext.EA_NEG, ext.EA_POS, ext.EA_POS_FULL, ext.COLD_WINDOW) + (() if measured else (ext.HEAT_TRANSFER,))
+        inputs = (ext.EA_NEG, ext.EA_POS, ext.EA_POS_FULL, ext.COLD_WINDOW, ext.COLD_CHARGE_TRANSFER) + (
+            () if measured else (ext.HEAT_TRANSFER,))
         return engine.simulate(struct, obs, concentrations=self.concentrations(engine, params, theta, soc),
                                ambient_k=self.ambient_k(obs), t_end=t_end, extra_inputs=inputs,
                                want_temperature=want_temperature, temperature_trace=measured, **args)
@@ -227,7 +236,7 @@ class Temperature(Candidate):
                         engine: Engine) -> PackParams:
         values = {ext.EA_NEG: theta["diffusivity_activation_energy_J_mol"],
                   ext.EA_POS: theta["diffusivity_activation_energy_J_mol"],
-                  ext.COLD_RESISTANCE: theta["cold_resistance_ohm"],
+                  ext.COLD_CHARGE_TRANSFER: theta["charge_transfer_resistance_ohm"],
                   ext.EA_POS_FULL: theta.get("full_lithiation_activation_energy_J_mol", 0.0),
                   ext.COLD_WINDOW: theta.get("window_loss_per_k", 0.0),
                   ext.ANCHOR_TEMPERATURE: ext.extension_value(params, ext.ANCHOR_TEMPERATURE)}

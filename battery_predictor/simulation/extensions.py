@@ -23,7 +23,10 @@ extension                  what it changes
                            the fast simulator and the predictor's runner); a stoichiometry window of
                            both electrodes that narrows below the anchor temperature and widens above it
                            (:data:`COLD_WINDOW`, :func:`cold_window_scale`: an accessible capacity
-                           that follows the temperature at any rate). The cell is isothermal at
+                           that follows the temperature at any rate); an Arrhenius charge-transfer
+                           resistance that grows as the negative surface empties, whose excess over
+                           the anchor temperature drops the voltage in PyBaMM's model
+                           (:data:`COLD_CHARGE_TRANSFER`, :func:`charge_transfer_excess_ohm`). The cell is isothermal at
                            the given (measured) temperature, as the predictor runs at the last
                            measured temperature; with ``Total heat transfer coefficient [W.m-2.K-1]``
                            in ``cell.extra`` (fitted on data without a temperature measurement) the
@@ -111,6 +114,15 @@ COLD_RESISTANCE_ACTIVATION_J_MOL = 30000.0
 #: :data:`ANCHOR_TEMPERATURE`, 298.15 K when absent - the key keeps its name): the cell's accessible capacity
 #: falls in the cold at any rate, whichever electrode ends the discharge. See :func:`cold_window_scale`.
 COLD_WINDOW = "Stoichiometry window loss per kelvin below 298.15 K [K-1]"
+#: Charge-transfer resistance of the cell (Ohm per cell) at the anchor temperature and at half lithiation of the
+#: negative electrode's surface, Arrhenius with :data:`COLD_RESISTANCE_ACTIVATION_J_MOL` and following the inverse
+#: of the exchange-current density's concentration dependence (:func:`charge_transfer_excess_ohm`). Only its excess
+#: over the anchor temperature enters the cell voltage (:func:`apply_extension_model`): 0 at the anchor, and in the
+#: cold it grows most towards the discharged end, where the negative surface empties.
+COLD_CHARGE_TRANSFER = "Arrhenius charge-transfer resistance at the anchor temperature [Ohm]"
+#: PyBaMM function parameter (of the negative surface stoichiometry and the cell temperature) that the model hook
+#: subtracts, times the cell current, from the voltage; defined by :func:`apply_extension_parameter_values`.
+CHARGE_TRANSFER_EXCESS = "Charge-transfer resistance excess over the anchor temperature [Ohm]"
 #: Default reference temperature (K) of :data:`COLD_WINDOW` and :data:`COLD_RESISTANCE`, used when the params
 #: carry no :data:`ANCHOR_TEMPERATURE`.
 COLD_REFERENCE_K = 298.15
@@ -154,7 +166,7 @@ _OPTIONS: dict[str, dict[str, Any]] = {
 #: the hysteresis, whose neutral value would be no hysteresis).
 EXTENSION_DEFAULTS: dict[str, dict[str, float]] = {
     "temperature": {EA_NEG: 0.0, EA_POS: 0.0, EA_SERIES: 0.0, EA_KINETICS: 0.0, EA_POS_FULL: 0.0, COLD_RESISTANCE: 0.0,
-                    COLD_WINDOW: 0.0, ANCHOR_TEMPERATURE: COLD_REFERENCE_K},
+                    COLD_WINDOW: 0.0, COLD_CHARGE_TRANSFER: 0.0, ANCHOR_TEMPERATURE: COLD_REFERENCE_K},
     "resistance_growth": {CONTACT_RESISTANCE: 0.0},
     "current_offset": {CURRENT_OFFSET: 0.0},
     "cell_imbalance": {WEAK_FRACTION: 1.0},
@@ -420,6 +432,59 @@ def cold_window_scale(loss_per_k: Any, temperature_k: Any, anchor_k: Any = COLD_
     return 1.0 / np.maximum(1.0 - float(loss_per_k) * below, 0.2)
 
 
+def arrhenius_ratio(activation_j_mol: Any, temperature_k: Any, anchor_k: Any = COLD_REFERENCE_K) -> Any:
+    """``exp(E/R (1/T - 1/T_anchor))``: an Arrhenius resistance (or time constant) at ``temperature_k`` over its
+    value at ``anchor_k`` (K; activation energy ``E`` in J/mol). Numbers (a numpy array) or PyBaMM symbols."""
+    import pybamm
+
+    if any(isinstance(x, pybamm.Symbol) for x in (activation_j_mol, temperature_k, anchor_k)):
+        return pybamm.exp(activation_j_mol / R_GAS * (1.0 / temperature_k - 1.0 / anchor_k))
+    return arrhenius_factor(temperature_k, float(activation_j_mol), float(anchor_k))
+
+
+def charge_transfer_shape(sto: Any) -> Any:
+    """``j0(1/2) / j0(sto)`` for an exchange-current density ``j0 ~ sqrt(sto (1 - sto))`` (Butler-Volmer, symmetric)
+    (-): the charge-transfer resistance at stoichiometry ``sto`` over its value at half lithiation. 1 at 0.5, 2.1 at
+    0.06. Numbers or PyBaMM symbols; ``sto`` is kept within 1e-3..1-1e-3."""
+    import pybamm
+
+    if isinstance(sto, pybamm.Symbol):
+        s = pybamm.maximum(pybamm.minimum(sto, 1.0 - 1e-3), 1e-3)
+        return 0.5 / pybamm.sqrt(s * (1.0 - s))
+    s = np.clip(np.asarray(sto, dtype=float), 1e-3, 1.0 - 1e-3)
+    return 0.5 / np.sqrt(s * (1.0 - s))
+
+
+def charge_transfer_excess_ohm(r_anchor_ohm: Any, sto: Any, temperature_k: Any, anchor_k: Any = COLD_REFERENCE_K,
+                               loss_per_k: Any = 0.0, sto_charged: float | None = None) -> Any:
+    """Excess of the Arrhenius charge-transfer resistance over its value at the anchor temperature (Ohm per cell).
+
+    ``R (exp(E/R (1/T - 1/T_anchor)) - 1) j0(1/2) / j0(s)`` with ``E`` = :data:`COLD_RESISTANCE_ACTIVATION_J_MOL` and
+    ``s`` the negative electrode's surface stoichiometry, moved as the cold window moves its open-circuit potential
+    (``sto_charged + (sto - sto_charged) * cold_window_scale``, when ``sto_charged`` is given): the resistance
+    grows in the cold, and most where the accessible part of the electrode runs empty. 0 at the anchor.
+
+    Parameters
+    ----------
+    r_anchor_ohm : float or pybamm.Symbol
+        Charge-transfer resistance (Ohm per cell) at ``anchor_k`` and half lithiation (:data:`COLD_CHARGE_TRANSFER`).
+    sto : float, numpy.ndarray or pybamm.Symbol
+        Negative electrode surface stoichiometry (-).
+    temperature_k : float, numpy.ndarray or pybamm.Symbol
+        Cell temperature (K).
+    anchor_k : float or pybamm.Symbol
+        Temperature (K) at which the identified model holds (:data:`ANCHOR_TEMPERATURE`).
+    loss_per_k : float or pybamm.Symbol
+        Cold window loss (1/K, :data:`COLD_WINDOW`).
+    sto_charged : float, optional
+        The electrode's stoichiometry at 100 % SOC (the window's fixed end); None: no window.
+    """
+    if sto_charged is not None:
+        sto = sto_charged + (sto - sto_charged) * cold_window_scale(loss_per_k, temperature_k, anchor_k)
+    ratio = arrhenius_ratio(COLD_RESISTANCE_ACTIVATION_J_MOL, temperature_k, anchor_k)
+    return r_anchor_ohm * (ratio - 1.0) * charge_transfer_shape(sto)
+
+
 def _cold_window_ocp(ocp: Callable[[pybamm.Symbol], pybamm.Symbol],
                      sto_charged: float) -> Callable[[pybamm.Symbol], pybamm.Symbol]:
     """An electrode OCP with its window narrowed at the cell's (ambient) temperature (:data:`COLD_WINDOW`).
@@ -442,6 +507,18 @@ def _cold_window_ocp(ocp: Callable[[pybamm.Symbol], pybamm.Symbol],
         return ocp(pybamm.maximum(pybamm.minimum(moved, 1.0 - 1e-6), 1e-6))
 
     return narrowed
+
+
+def _charge_transfer_excess_function(sto_charged: float | None) -> Callable[[pybamm.Symbol, pybamm.Symbol], pybamm.Symbol]:
+    """:data:`CHARGE_TRANSFER_EXCESS` as PyBaMM function of (negative surface stoichiometry, cell temperature)."""
+    import pybamm
+
+    def excess(sto: pybamm.Symbol, temperature_k: pybamm.Symbol) -> pybamm.Symbol:
+        return charge_transfer_excess_ohm(pybamm.Parameter(COLD_CHARGE_TRANSFER), sto, temperature_k,
+                                          pybamm.Parameter(ANCHOR_TEMPERATURE), pybamm.Parameter(COLD_WINDOW),
+                                          sto_charged)
+
+    return excess
 
 
 def _electrode_scale(pv: pybamm.ParameterValues, domain: str) -> float:
@@ -500,12 +577,7 @@ def half_width_factor(activation_j_mol: Any, temperature_k: Any, anchor_k: Any =
 
     Numbers (returns a numpy array) or PyBaMM symbols (:data:`HYS_ACTIVATION`).
     """
-    import pybamm
-
-    if any(isinstance(x, pybamm.Symbol) for x in (activation_j_mol, temperature_k, anchor_k)):
-        return pybamm.exp(activation_j_mol / R_GAS * (1.0 / temperature_k - 1.0 / anchor_k))
-    t = np.asarray(temperature_k, dtype=float)
-    return np.exp(float(activation_j_mol) / R_GAS * (1.0 / t - 1.0 / float(anchor_k)))
+    return arrhenius_ratio(activation_j_mol, temperature_k, anchor_k)
 
 
 def hysteresis_half_width_v(params: PackParams, temperature_k: float) -> float:
@@ -522,13 +594,52 @@ def apply_extension_model(params: PackParams, model: Any) -> Any:
 
     Called by :func:`~battery_predictor.simulation.cell_setup.build_model`. ``hysteresis`` with a relaxation rate
     (:data:`HYS_RELAX`, not 0) adds ``- r h`` to the Axen model's hysteresis ODE of the positive electrode.
+    ``temperature`` with a charge-transfer resistance (:data:`COLD_CHARGE_TRANSFER`, not 0) subtracts
+    ``I`` times :data:`CHARGE_TRANSFER_EXCESS` (a function of the negative surface stoichiometry and the cell
+    temperature) from the voltage and its cut-off events (:func:`_with_charge_transfer_excess`).
     """
-    if "hysteresis" not in params.extensions or not extension_value(params, HYS_RELAX):
-        return model
     import pybamm
 
+    if "temperature" in params.extensions and extension_value(params, COLD_CHARGE_TRANSFER):
+        model = _with_charge_transfer_excess(model)
+    if "hysteresis" not in params.extensions or not extension_value(params, HYS_RELAX):
+        return model
     h = model.variables["Positive electrode hysteresis state"]
     model.rhs[h] = model.rhs[h] - pybamm.Parameter(HYS_RELAX) * h
+    return model
+
+
+#: PyBaMM's names of the cell voltage (the predictor's runner reads ``Terminal voltage [V]``, the engine ``Voltage [V]``).
+_VOLTAGE_ALIASES = ("Voltage [V]", "Terminal voltage [V]", "Voltage expression [V]")
+
+
+def _with_charge_transfer_excess(model: Any) -> Any:
+    """``model`` (a PyBaMM battery model, not yet processed) whose voltage drops by ``I`` x :data:`CHARGE_TRANSFER_EXCESS`.
+
+    The drop depends on the state only through the negative surface stoichiometry (as the Butler-Volmer
+    overpotentials), so the SPM engine's extraction of the voltage covers it. The voltage's aliases and the
+    voltage events see the same drop; its heat is not added to a lumped thermal model.
+    """
+    import pybamm
+
+    v_old = model.variables["Voltage [V]"]
+    drop = model.variables["Current [A]"] * pybamm.FunctionParameter(CHARGE_TRANSFER_EXCESS, {
+        "Negative particle surface stoichiometry": model.variables["X-averaged negative particle surface stoichiometry"],
+        "Temperature [K]": model.variables["Volume-averaged cell temperature [K]"]})
+    v_new = v_old - drop
+    for key in _VOLTAGE_ALIASES:  # separate (equal) expressions with a contact resistance
+        if key in model.variables:
+            model.variables[key] = v_new
+    model.variables["Battery voltage [V]"] = v_new * pybamm.Parameter(
+        "Number of cells connected in series to make a battery")
+    events = []
+    for event in model.events:
+        if event.name.startswith("Minimum voltage"):  # V - V_min
+            event = pybamm.Event(event.name, event.expression - drop, event.event_type)
+        elif event.name.startswith("Maximum voltage"):  # V_max - V
+            event = pybamm.Event(event.name, event.expression + drop, event.event_type)
+        events.append(event)
+    model.events = events
     return model
 
 
@@ -563,9 +674,14 @@ def apply_extension_parameter_values(params: PackParams, pv: Any) -> Any:
                 pv[j0_key] = _arrhenius_exchange_current(pv[j0_key], t_ref)
         charged = cold_window_anchors(params, pv)
         ocp_keys = ("Negative electrode OCP [V]", "Positive electrode OCP [V]")
-        if charged is not None and all(callable(pv[k]) for k in ocp_keys):
+        if charged is not None and not all(callable(pv[k]) for k in ocp_keys):
+            charged = None  # tabulated or constant OCPs: no window
+        if charged is not None:
             for key, sto_charged in zip(ocp_keys, charged):
                 pv[key] = _cold_window_ocp(pv[key], sto_charged)
+        # the charge-transfer resistance follows the negative surface as the window moves it
+        pv.update({CHARGE_TRANSFER_EXCESS: _charge_transfer_excess_function(charged[0] if charged else None)},
+                  check_already_exists=False)
     if "electrolyte_transport" in exts:
         b = pv[BRUGGEMAN]
         for key in BRUGGEMAN_KEYS:

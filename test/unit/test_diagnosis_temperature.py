@@ -145,7 +145,50 @@ def test_cold_window_shortens_a_cold_low_rate_discharge_and_changes_nothing_at_t
         rec = Recording(t, np.linspace(4.1, 3.3, t.size), np.full(t.size, 2.5), np.full(t.size, temp_k))
         obs = observe(rec, params)
         for loss in (0.0, 0.004):
-            theta = {"diffusivity_activation_energy_J_mol": 0.0, "cold_resistance_ohm": 1e-5, "window_loss_per_k": loss}
+            theta = {"diffusivity_activation_energy_J_mol": 0.0, "charge_transfer_resistance_ohm": 1e-5, "window_loss_per_k": loss}
             ends[(temp_k, loss)] = Temperature().simulate(Engine(), params, obs, theta, 1.0).end_time_s
     assert ends[(298.15, 0.004)] == pytest.approx(ends[(298.15, 0.0)], rel=2e-3)
     assert ends[(273.15, 0.004)] < 0.95 * ends[(273.15, 0.0)]
+
+
+def test_charge_transfer_excess_is_zero_at_the_anchor_and_grows_in_the_cold_towards_the_empty_negative():
+    r_ohm, anchor_k = 0.01, 301.5
+    assert float(ext.charge_transfer_excess_ohm(r_ohm, 0.5, anchor_k, anchor_k)) == pytest.approx(0.0, abs=1e-15)
+    arrhenius = math.exp(ext.COLD_RESISTANCE_ACTIVATION_J_MOL / ext.R_GAS * (1 / 273.15 - 1 / anchor_k))
+    half = float(ext.charge_transfer_excess_ohm(r_ohm, 0.5, 273.15, anchor_k))
+    assert half == pytest.approx(r_ohm * (arrhenius - 1.0))  # the stated value at half lithiation
+    empty = float(ext.charge_transfer_excess_ohm(r_ohm, 0.06, 273.15, anchor_k))
+    assert empty == pytest.approx(half * 0.5 / math.sqrt(0.06 * 0.94))  # 1 / j0 ~ 1 / sqrt(x (1 - x))
+    assert float(ext.charge_transfer_excess_ohm(r_ohm, 0.5, 310.0, anchor_k)) < 0.0  # warmer than the anchor
+
+
+def test_charge_transfer_excess_follows_the_stoichiometry_the_cold_window_moves():
+    r_ohm, x_charged, loss = 0.01, 0.8, 0.004
+    plain = float(ext.charge_transfer_excess_ohm(r_ohm, 0.2, 273.15, 298.15))
+    moved = float(ext.charge_transfer_excess_ohm(r_ohm, 0.2, 273.15, 298.15, loss, x_charged))
+    x_moved = x_charged + (0.2 - x_charged) / (1.0 - loss * 25.0)
+    assert moved == pytest.approx(plain * float(ext.charge_transfer_shape(x_moved) / ext.charge_transfer_shape(0.2)))
+    assert moved > plain
+
+
+@pytest.mark.slow
+def test_charge_transfer_term_drops_the_cold_voltage_by_current_times_its_excess_and_nothing_at_the_anchor():
+    """In PyBaMM's model: V - I R_excess(x_surf, T); at the anchor temperature the voltage is the model's own."""
+    from battery_predictor.simulation import SimulationRequest, StepLoad
+    from battery_predictor.simulation.fast import FastPackSimulator
+
+    base = load_params(PARAMS / "lgm50.yaml")
+    cell_a = 5.0
+    load = StepLoad.constant(cell_a * base.parallel, 120.0)
+    volts = {}
+    for r_ohm in (0.0, 0.01):
+        params = _lgm50(**{ext.COLD_CHARGE_TRANSFER: r_ohm})
+        for t_k in (298.15, 273.15):
+            res = FastPackSimulator().simulate(params, SimulationRequest(load=load, ambient_temperature_k=t_k))
+            volts[(r_ohm, t_k)] = np.asarray(res.pack_voltage_v) / base.series
+    np.testing.assert_allclose(volts[(0.01, 298.15)], volts[(0.0, 298.15)], rtol=0, atol=1e-6)
+    drop = volts[(0.0, 273.15)] - volts[(0.01, 273.15)]
+    lowest = float(ext.charge_transfer_excess_ohm(0.01, 0.5, 273.15))  # the shape is smallest at half lithiation
+    assert np.all(drop >= cell_a * lowest)
+    x_charged = ext.cold_window_anchors(base)[0]  # the full cell's negative surface at the start
+    assert drop[0] == pytest.approx(cell_a * float(ext.charge_transfer_excess_ohm(0.01, x_charged, 273.15)), rel=0.05)

@@ -20,6 +20,7 @@ from battery_predictor.prediction.pack_model import FALLBACK_PREFIX, pack_model
 from battery_predictor.simulation.engine.segments import EnginePack
 from battery_predictor.simulation.extensions import (
     ANCHOR_TEMPERATURE,
+    COLD_CHARGE_TRANSFER,
     COLD_RESISTANCE,
     COLD_WINDOW,
     CONTACT_RESISTANCE,
@@ -40,7 +41,7 @@ SAME_AS_PYBAMM_V = 1e-4
 COVERED = {
     CURRENT_OFFSET: 0.3, CONTACT_RESISTANCE: 0.002, WEAK_FRACTION: 0.85,
     EA_NEG: 30000.0, EA_POS: 25000.0, EA_SERIES: 20000.0, EA_KINETICS: 20000.0, COLD_WINDOW: 0.004,
-    COLD_RESISTANCE: 0.005, ANCHOR_TEMPERATURE: 300.0,
+    COLD_RESISTANCE: 0.005, COLD_CHARGE_TRANSFER: 0.003, ANCHOR_TEMPERATURE: 300.0,
 }
 EXTENSIONS = ("current_offset", "resistance_growth", "cell_imbalance", "temperature")
 
