@@ -35,7 +35,7 @@ import numpy as np
 
 from battery_predictor.cli.fit_identify import simulator_named
 from battery_predictor.fitting.identifiable import default_space, pybamm_values, shipped_coordinates
-from battery_predictor.fitting.identification import IdentificationProblem, identifiability_of, identify
+from battery_predictor.fitting.identification import identifiability_of, identify_structures
 from battery_predictor.fitting.problem import request_for_recording
 from battery_predictor.fitting.resample import resample_windows
 from battery_predictor.params import load_params
@@ -116,15 +116,19 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float, simulator: 
     fit_day, _, _ = day(truth_params, 2 * seed + 1, None, pack)
     test_day, test_clean_v, test_load = day(truth_params, 2 * seed + 2, test_ocv_v, pack)
     fit_rec = resample_windows(fit_day, resample_s)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        space = default_space(params, [fit_rec])
-    problem = IdentificationProblem(params, [fit_rec], simulator_named(simulator), space)
+    def space_for(structure_params):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            return default_space(structure_params, [fit_rec])
+
     tic = time.perf_counter()
-    result = identify(problem, evaluations=evaluations, seed=seed)
+    # as `fit` does: the params' structure and, where the day has current steps, the ohmic one
+    fits = identify_structures(params, [fit_rec], simulator_named(simulator), space_for, evaluations=evaluations,
+                               seed=seed)
     seconds = time.perf_counter() - tic
+    problem, result = fits[0].problem, fits[0].result
     score = problem.score(result.coordinates)
-    fitted = params.with_values(score.values[0])
+    fitted = fits[0].params.with_values(score.values[0])
     threshold = float(params.thresholds[threshold_key])
     req = request_for_recording(fitted, test_day, initial_state="voltage")
     pred = get_simulator("fast").simulate(fitted, req)
@@ -144,7 +148,9 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float, simulator: 
     report = identifiability_of(problem, result.unit)
     return {
         "pack": pack, "seed": seed, "fit_thermal": fit_thermal, "truth": truth, "fitted": {k: result.coordinates[k] for k in truth},
-        "fit_r2_mod": score.r2_mod, "fit_rmse_mv": score.rmse_mv[0], "evaluations": result.evaluations,
+        "fit_r2_mod": score.r2_mod, "fit_rmse_mv": score.rmse_mv[0], "structure": fits[0].label,
+        "structures_r2_mod": {f.label: f.r2_mod for f in fits},
+        "evaluations": sum(f.result.evaluations for f in fits),
         "fit_seconds": seconds, "heldout_rmse_mv": 1e3 * rmse, "heldout_rmse_programmed_load_mv": 1e3 * rmse_prog,
         "heldout_rmse_to_threshold_mv": 1e3 * rmse_op,
         "heldout_time_to_threshold_s": {"measured": t_meas, "noise_free_truth": t_clean, "predicted": t_pred},
