@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -119,21 +120,85 @@ KNEE_STEEPNESS = 2.0
 KNEE_CHARGE_FRACTION = 0.03
 
 
+#: A current step is a change between consecutive samples of at least this share of the recording's current range.
+STEP_FRACTION_OF_RANGE = 0.1
+#: Metadata key under which a recording averaged over windows keeps the step resistance of its samples as
+#: measured: ``[Ohm, number of steps]`` (:func:`~battery_predictor.fitting.resample.resample_windows`,
+#: :func:`as_measured_steps`).
+AS_MEASURED_STEP_RESISTANCE_KEY = "ohmic_resistance_as_measured_ohm"
+
+
+def _step_ratios(rec: Recording) -> np.ndarray:
+    """``-dV / dI`` (Ohm) over the recording's current steps (:data:`STEP_FRACTION_OF_RANGE`)."""
+    v = np.asarray(rec.voltage_v, dtype=float)
+    i = np.asarray(rec.current_a, dtype=float)
+    if i.size < 2:
+        return np.empty(0)
+    dv, di = np.diff(v), np.diff(i)
+    steps = np.abs(di) >= STEP_FRACTION_OF_RANGE * max(float(np.ptp(i)), 1e-12)
+    return -dv[steps] / di[steps]
+
+
 def ohmic_resistance_estimate(rec: Recording) -> float:
     """The recording's ohmic resistance from its current steps (Ohm, >= 0; 0 when it has none).
 
     The median of ``-dV / dI`` over consecutive samples whose current changes by at least 10 % of
     the recording's current range (fewer than three such steps: 0, e.g. a constant-current discharge).
     """
-    v = np.asarray(rec.voltage_v, dtype=float)
+    ratios = _step_ratios(rec)
+    if ratios.size < 3:
+        return 0.0
+    return max(float(np.median(ratios)), 0.0)
+
+
+def _load_step_ratios(rec: Recording) -> np.ndarray:
+    """:func:`_step_ratios` of a recording whose current varies by at least :data:`STEP_FRACTION_OF_RANGE` of its
+    largest magnitude; none otherwise (a constant-current discharge's "steps" are the current reading's noise)."""
     i = np.asarray(rec.current_a, dtype=float)
-    if i.size < 2:
+    if i.size < 2 or float(np.ptp(i)) < STEP_FRACTION_OF_RANGE * float(np.max(np.abs(i))):
+        return np.empty(0)
+    return _step_ratios(rec)
+
+
+def as_measured_steps(rec: Recording) -> list[float]:
+    """``[median -dV/dI (Ohm), number of steps]`` of the recording's load steps (:func:`step_resistance_ohm`), for
+    its metadata when it is averaged."""
+    ratios = _load_step_ratios(rec)
+    return [float(np.median(ratios)) if ratios.size else 0.0, float(ratios.size)]
+
+
+def step_resistance_ohm(recordings: Sequence[Recording]) -> float:
+    """The instantaneous resistance (Ohm, pack terminals) the recordings' current steps show; 0 when they have none.
+
+    The median of ``-dV / dI`` over the current steps of all recordings pooled (a step as in
+    :func:`ohmic_resistance_estimate`; a recording whose current range is below a tenth of its largest
+    current, such as a constant-current discharge, has none), at each recording's own resolution: a recording averaged over
+    windows contributes the estimate of its samples as measured, kept in its metadata
+    (:data:`AS_MEASURED_STEP_RESISTANCE_KEY`), once per step it had. A window average mixes the
+    step with the first seconds of polarisation; the samples as measured hold the step itself.
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        Voltage in V, current in A (discharge positive).
+
+    Returns
+    -------
+    float
+        The step resistance in Ohm (>= 0); 0 when fewer than three steps are found.
+    """
+    ratios: list[np.ndarray] = []
+    for rec in recordings:
+        kept = rec.metadata.get(AS_MEASURED_STEP_RESISTANCE_KEY)
+        if kept is not None:
+            value_ohm, count = kept
+            ratios.append(np.full(int(count), float(value_ohm)))
+        else:
+            ratios.append(_load_step_ratios(rec))
+    pooled = np.concatenate(ratios) if ratios else np.empty(0)
+    if pooled.size < 3:
         return 0.0
-    dv, di = np.diff(v), np.diff(i)
-    steps = np.abs(di) >= 0.1 * max(float(np.ptp(i)), 1e-12)
-    if int(np.count_nonzero(steps)) < 3:
-        return 0.0
-    return max(float(np.median(-dv[steps] / di[steps])), 0.0)
+    return max(float(np.median(pooled)), 0.0)
 
 
 def end_steepness(rec: Recording, charge_fraction: float = KNEE_CHARGE_FRACTION) -> float:

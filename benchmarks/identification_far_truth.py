@@ -35,12 +35,7 @@ import numpy as np
 
 from battery_predictor.cli.fit_identify import simulator_named
 from battery_predictor.fitting.identifiable import default_space, pybamm_values, shipped_coordinates
-from battery_predictor.fitting.identification import (
-    COARSE_WINDOW_S,
-    IdentificationProblem,
-    identifiability_of,
-    identify,
-)
+from battery_predictor.fitting.identification import COARSE_WINDOW_S, identifiability_of, identify_structures
 from battery_predictor.fitting.problem import request_for_recording
 from battery_predictor.fitting.resample import as_the_monitor_sees
 from battery_predictor.params import load_params
@@ -116,7 +111,8 @@ def rmse_v(predicted_v: np.ndarray, measured_v: np.ndarray, n: int) -> float:
 
 
 def run_seed(params, seed: int, evaluations: int, resample_s: float | None, simulator: str = "fast",
-             fit_thermal: str = "isothermal", pack: str = "temi", coarse_window_s: float | None = COARSE_WINDOW_S) -> dict:
+             fit_thermal: str = "isothermal", pack: str = "temi", coarse_window_s: float | None = COARSE_WINDOW_S,
+             ohmic: bool = False) -> dict:
     """Draw the truth of ``seed``, fit day 1 with ``params`` (made ``fit_thermal``), predict day 2 and score it."""
     rng = np.random.default_rng(1000 + seed)
     truth = draw_truth(params, rng)
@@ -126,15 +122,20 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float | None, simu
     fit_day, _, _ = day(truth_params, 2 * seed + 1, None, pack)
     test_day, test_clean_v, test_load = day(truth_params, 2 * seed + 2, test_ocv_v, pack)
     (fit_rec,), _, _ = as_the_monitor_sees([fit_day], resample_s)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        space = default_space(params, [fit_rec])
-    problem = IdentificationProblem(params, [fit_rec], simulator_named(simulator), space)
+
+    def space_for(structure_params):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            return default_space(structure_params, [fit_rec])
+
     tic = time.perf_counter()
-    result = identify(problem, evaluations=evaluations, seed=seed, coarse_window_s=coarse_window_s)
+    # as `fit` does: the params' structure and, with `ohmic`, the ohmic one where the day has current steps
+    fits = identify_structures(params, [fit_rec], simulator_named(simulator), space_for, ohmic=ohmic,
+                               evaluations=evaluations, seed=seed, coarse_window_s=coarse_window_s)
     seconds = time.perf_counter() - tic
+    problem, result = fits[0].problem, fits[0].result
     score = problem.score(result.coordinates)
-    fitted = params.with_values(score.values[0])
+    fitted = fits[0].params.with_values(score.values[0])
     threshold = float(params.thresholds[threshold_key])
     req = request_for_recording(fitted, test_day, initial_state="voltage")
     pred = get_simulator("fast").simulate(fitted, req)
@@ -160,8 +161,10 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float | None, simu
     report = identifiability_of(problem, result.unit)
     return {
         "pack": pack, "seed": seed, "fit_thermal": fit_thermal, "truth": truth, "fitted": {k: result.coordinates[k] for k in truth},
-        "fit_r2_mod": score.r2_mod, "fit_rmse_mv": score.rmse_mv[0], "evaluations": result.evaluations,
-        "fit_seconds": seconds, "coarse_window_s": coarse_window_s, "heldout_rmse_mv": 1e3 * rmse, "heldout_rmse_programmed_load_mv": 1e3 * rmse_prog,
+        "fit_r2_mod": score.r2_mod, "fit_rmse_mv": score.rmse_mv[0], "structure": fits[0].label,
+        "structures_r2_mod": {f.label: f.r2_mod for f in fits},
+        "evaluations": sum(f.result.evaluations for f in fits), "fit_seconds": seconds,
+        "coarse_window_s": coarse_window_s, "heldout_rmse_mv": 1e3 * rmse, "heldout_rmse_programmed_load_mv": 1e3 * rmse_prog,
         "heldout_rmse_to_threshold_mv": 1e3 * rmse_op,
         "truth_model_rmse_mv": 1e3 * rmse_v(floor.pack_voltage_v, test_day.voltage_v, n_floor),
         "truth_model_rmse_to_threshold_mv": 1e3 * rmse_v(floor.pack_voltage_v, test_day.voltage_v, n_floor_op),
@@ -186,11 +189,12 @@ def main() -> None:
     ap.add_argument("--pack", choices=tuple(PACKS), default="temi")
     ap.add_argument("--coarse-window", type=float, default=COARSE_WINDOW_S,
                     help="first-stage window of the identification, s (0: one stage on the data as given)")
+    ap.add_argument("--ohmic-structure", action="store_true", help="also identify the ohmic structure, as `fit --ohmic-structure`")
     args = ap.parse_args()
     params = load_params(REPO / "params" / PACKS[args.pack][0])
     for seed in args.seeds:
         print(json.dumps(run_seed(params, seed, args.evaluations, args.resample, args.simulator, args.fit_thermal,
-                                  args.pack, args.coarse_window or None)), flush=True)
+                                  args.pack, args.coarse_window or None, args.ohmic_structure)), flush=True)
 
 
 if __name__ == "__main__":

@@ -58,6 +58,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="identify: fit the pack voltage only, also when the data carry series-group voltages "
                         "(group<k>_voltage_V) and the params use cell_imbalance (default: the weakest group's "
                         "voltage is fitted too)")
+    p.add_argument("--ohmic-structure", action="store_true",
+                   help="identify: where the data have current steps, also identify the ohmic structure (the fastest "
+                        "kinetics searched, the series resistance started at the data's instantaneous step) with the "
+                        "same budget, and keep the one with the higher R2_mod on the fit data (default: the params' "
+                        "structure only)")
     add_resample_arguments(p, "fit")
     p.add_argument("--trials", type=int, default=None, help="tpe: total TPE trials (default 1000)")
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")

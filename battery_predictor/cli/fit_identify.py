@@ -51,9 +51,8 @@ def run_identify(args: argparse.Namespace) -> int:
     from battery_predictor.fitting.identification import (
         DEFAULT_STARTS,
         DEFAULT_TPE_FRACTION,
-        IdentificationProblem,
         identifiability_of,
-        identify,
+        identify_structures,
     )
     from battery_predictor.params import load_params
     from battery_predictor.plots import plot_voltage_fit
@@ -66,29 +65,38 @@ def run_identify(args: argparse.Namespace) -> int:
         with_thermal(load_params(args.params), getattr(args, "thermal", "params"))))
     thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
     recs = prepared_data(args, params, command="fit")
-    space = _space(params, recs, tuple(args.coordinates))
-    problem = IdentificationProblem(params=params, recordings=recs, simulator=simulator_named(args.simulator),
-                                    space=space, group_voltages=not getattr(args, "ignore_group_voltages", False))
-    result = identify(problem, evaluations=args.evaluations, seed=args.seed,
-                      tpe_fraction=DEFAULT_TPE_FRACTION if args.tpe_fraction is None else args.tpe_fraction,
-                      starts=DEFAULT_STARTS if args.starts is None else args.starts,
-                      progress=_progress_printer(not args.no_progress and not args.json))
-    best = problem.score(result.coordinates)
+    warned: set[str] = set()
+    fits = identify_structures(params, recs, simulator_named(args.simulator),
+                               lambda p: _space(p, recs, tuple(args.coordinates), warned),
+                               group_voltages=not getattr(args, "ignore_group_voltages", False),
+                               ohmic=getattr(args, "ohmic_structure", False),
+                               progress=_progress_printer(not args.no_progress and not args.json),
+                               evaluations=args.evaluations, seed=args.seed,
+                               tpe_fraction=DEFAULT_TPE_FRACTION if args.tpe_fraction is None else args.tpe_fraction,
+                               starts=DEFAULT_STARTS if args.starts is None else args.starts)
+    chosen = fits[0]
+    params, problem, result, space = chosen.params, chosen.problem, chosen.result, chosen.problem.space
+    best = chosen.score if chosen.score is not None else problem.score(result.coordinates)
+    structures = [{"structure": f.label, "r2_mod": f.r2_mod, "evaluations": f.result.evaluations,
+                   "seconds": f.result.seconds} for f in fits]
+    evaluations, seconds = sum(f.result.evaluations for f in fits), sum(f.result.seconds for f in fits)
     report = identifiability_of(problem, result.unit)
     out = Path(args.out)
     states = {str(r.source): result.coordinates[c.name] for r, c in zip(recs, space[-len(recs):], strict=True)}
-    fitted = params.with_values(best.values[0], provenance=_provenance(args, params, recs, best, result, report,
-                                                                       states, thermal, problem.fits_weakest_group),
-                                fit=params.fit)
+    provenance = _provenance(args, params, recs, best, result, report, states, thermal, problem.fits_weakest_group)
+    provenance.update({"structure": chosen.label, "structures": structures})
+    fitted = params.with_values(best.values[0], provenance=provenance, fit=params.fit)
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}",
                      identifiability=report.plot_rows())
     if args.json:
-        print_json({"method": "identify", "resample_s": args.resample, "r2_mod": best.r2_mod, "r2_mod_per_file": best.per_recording,
-                    "rmse_mv_per_file": best.rmse_mv, "evaluations": result.evaluations,
-                    "tpe_evaluations": result.tpe_evaluations, "seconds": result.seconds,
-                    "model_seconds": result.model_seconds, "optimiser_seconds": result.optimiser_seconds,
+        print_json({"method": "identify", "resample_s": args.resample, "structure": chosen.label,
+                    "structures": structures, "r2_mod": best.r2_mod, "r2_mod_per_file": best.per_recording,
+                    "rmse_mv_per_file": best.rmse_mv, "evaluations": evaluations,
+                    "tpe_evaluations": sum(f.result.tpe_evaluations for f in fits), "seconds": seconds,
+                    "model_seconds": sum(f.result.model_seconds for f in fits),
+                    "optimiser_seconds": sum(f.result.optimiser_seconds for f in fits),
                     "coordinates": result.coordinates, "params": best.values[0],
                     "fitted_weakest_group_voltage": problem.fits_weakest_group,
                     "identifiability": report.to_dict(), "ocp": ocp_origin(params), "thermal": thermal,
@@ -99,6 +107,9 @@ def run_identify(args: argparse.Namespace) -> int:
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
           f"({result.evaluations} evaluations, {result.seconds:.0f} s: model {result.model_seconds:.1f} s, "
           f"optimiser {result.optimiser_seconds:.1f} s; {ocp_origin(params)}; {thermal} cell)")
+    if len(fits) > 1:
+        print(f"structure: {chosen.label} (" + ", ".join(f"{f.label} R2_mod {f.r2_mod:.4f}" for f in fits)
+              + f"; {evaluations} evaluations, {seconds:.0f} s in all)")
     for c in space:
         print(f"  {c.name:<34} {c.initial:>12.5g} -> {result.coordinates[c.name]:>12.5g}   "
               f"[{c.low:.4g}, {c.high:.4g}]{' log' if c.log else ''}")
@@ -110,15 +121,20 @@ def run_identify(args: argparse.Namespace) -> int:
     return 0
 
 
-def _space(params: PackParams, recs: Sequence[Recording], extra: tuple[str, ...]) -> list[Coordinate]:
-    """The identifiable coordinates of ``params`` on ``recs`` (plus ``extra``); its warnings go to stderr."""
+def _space(params: PackParams, recs: Sequence[Recording], extra: tuple[str, ...],
+           warned: set[str] | None = None) -> list[Coordinate]:
+    """The identifiable coordinates of ``params`` on ``recs`` (plus ``extra``); its warnings go to stderr, each
+    once (``warned`` holds those already written)."""
     from battery_predictor.fitting.identifiable import default_space
 
+    warned = set() if warned is None else warned
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
         space = default_space(params, recs, extra=extra)
     for w in caught:
-        sys.stderr.write(f"warning: {w.message}\n")
+        if str(w.message) not in warned:
+            warned.add(str(w.message))
+            sys.stderr.write(f"warning: {w.message}\n")
     return space
 
 

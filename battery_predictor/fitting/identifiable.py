@@ -59,7 +59,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -67,7 +67,7 @@ from battery_predictor.errors import ParamsError, SimulationError
 from battery_predictor.fitting.space import unit_to_value, value_to_unit
 from battery_predictor.ocp import STO_GRID, initial_stoichiometries, ocp_curves
 from battery_predictor.params import INTERCONNECT_KEYS, PackParams
-from battery_predictor.recording import Recording
+from battery_predictor.recording import Recording, step_resistance_ohm
 
 #: Faraday constant in C/mol.
 FARADAY_C_MOL = 96485.33212
@@ -362,6 +362,50 @@ def kinetic_values(params: PackParams, coordinates: Mapping[str, float]) -> dict
     return out
 
 
+def ohmic_structure(params: PackParams, recordings: Sequence[Recording]) -> tuple[PackParams, float] | None:
+    """The params with the step of the data carried by the series resistance, or None when the data show no step.
+
+    A current step shows the cell's instantaneous voltage step (:func:`~battery_predictor.recording.step_resistance_ohm`,
+    at the data's own resolution). The SPM splits it between the series resistance and the Butler-Volmer
+    overpotential; a search from the params' kinetics keeps it in the overpotential, whose basin it does
+    not leave, while many cells' step is ohmic (current-independent). This structure gives every electrode
+    whose particle radius and diffusivity are scalars the fastest kinetics of :data:`KINETIC_SCALE_RANGE`
+    (its reaction area scaled, the capacity and the diffusion time kept, :func:`kinetic_values`), so the
+    kinetic overpotential is a small part of the step, and starts the series resistance at the measured step.
+
+    Parameters
+    ----------
+    params : PackParams
+        The starting model.
+    recordings : sequence of Recording
+        The fit data (voltage in V, current in A).
+
+    Returns
+    -------
+    tuple of (PackParams, float) or None
+        The params with the fast kinetics and the step resistance (Ohm, pack terminals) to start the
+        series resistance from; None without at least three current steps or without a scalable electrode.
+    """
+    step_ohm = step_resistance_ohm(recordings)
+    if step_ohm <= 0.0:
+        return None
+    scales = {}
+    for name in _KINETIC_ELECTRODES:
+        try:
+            _check_kinetic_scalable(params, name)
+        except ParamsError:
+            continue
+        scales[name] = KINETIC_SCALE_RANGE[1]
+    if not scales:
+        return None
+    return params.with_values(kinetic_values(params, scales)), step_ohm
+
+
+def with_start_value(space: Sequence[Coordinate], name: str, value: float) -> list[Coordinate]:
+    """``space`` with coordinate ``name`` started at ``value`` (clipped into its box); the others unchanged."""
+    return [replace(c, initial=min(max(float(value), c.low), c.high)) if c.name == name else c for c in space]
+
+
 def _widened(name: str, initial: float, low: float, high: float, log: bool) -> Coordinate:
     return Coordinate(name, initial, min(low, initial), max(high, initial), log)
 
@@ -516,5 +560,5 @@ def fitted_parameter_names(values: Mapping[str, float]) -> list[str]:
 
 __all__ = [
     "CORE_COORDINATES", "HYSTERESIS_COORDINATES", "OPTIONAL_COORDINATES", "Coordinate", "ElectrodeBasis", "default_space", "electrode_basis",
-    "initial_stoichiometries", "kinetic_values", "ocp_curves", "pybamm_values", "shipped_coordinates", "fitted_parameter_names",
+    "initial_stoichiometries", "kinetic_values", "ocp_curves", "ohmic_structure", "with_start_value", "pybamm_values", "shipped_coordinates", "fitted_parameter_names",
 ]

@@ -23,7 +23,7 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -661,6 +661,104 @@ def _identify_one_stage(problem: IdentificationProblem, *, evaluations: int, see
                                 seconds=time.perf_counter() - tic, history=history, model_seconds=model_s)
 
 
+#: Labels of the structures :func:`identify_structures` fits.
+STRUCTURE_AS_GIVEN = "params"
+STRUCTURE_OHMIC = "ohmic step"
+
+
+@dataclass(frozen=True)
+class StructureFit:
+    """One model structure identified on the data (:func:`identify_structures`).
+
+    Attributes
+    ----------
+    label : str
+        :data:`STRUCTURE_AS_GIVEN` or :data:`STRUCTURE_OHMIC`.
+    params : PackParams
+        The params the structure starts from (the fitted params are these with the identified values).
+    problem : IdentificationProblem
+        Its identification problem.
+    result : IdentificationResult
+        The identification.
+    score : CandidateScore or None
+        R2_mod and RMSE at the result (None when it fails to simulate).
+    """
+
+    label: str
+    params: PackParams
+    problem: IdentificationProblem
+    result: IdentificationResult
+    score: CandidateScore | None
+
+    @property
+    def r2_mod(self) -> float:
+        """Mean R2_mod on the fit data (``-inf`` when the result fails to simulate)."""
+        return self.score.r2_mod if self.score is not None and math.isfinite(self.score.r2_mod) else -math.inf
+
+
+def identify_structures(params: PackParams, recordings: Sequence[Recording], simulator: PackSimulator,
+                        space_for: Callable[[PackParams], list[Coordinate]], *, group_voltages: bool = True,
+                        ohmic: bool = False, progress: Callable[[str, int, float], None] | None = None,
+                        **identify_options: Any) -> list[StructureFit]:
+    """Identify the params as given and, with ``ohmic`` where the data show current steps, the ohmic structure; best first.
+
+    The ohmic structure (:func:`~battery_predictor.fitting.identifiable.ohmic_structure`: the fastest
+    kinetics searched, the series resistance started at the data's instantaneous step) is a second
+    model of the same coordinates, identified with the same options (so the budget is per structure);
+    the structures are ranked by R2_mod on the fit data (seed paper Eq. 1-3), as the end points within
+    one identification are (:func:`select_by_r2_mod`).
+
+    Parameters
+    ----------
+    params : PackParams
+        The starting model.
+    recordings : sequence of Recording
+        The fit data.
+    simulator : PackSimulator
+        The simulator of every evaluation.
+    space_for : callable
+        ``space_for(params)``: the search box of a structure's params (e.g. :func:`default_space`).
+    group_voltages : bool
+        As :class:`IdentificationProblem`.
+    ohmic : bool
+        True: also the ohmic structure where the data have current steps (``fit --ohmic-structure``);
+        False (default): the params' structure only.
+    progress : callable, optional
+        ``progress(phase, evaluations, best_cost)``; the phase names the structure.
+    **identify_options
+        Passed to :func:`identify` (``evaluations``, ``seed``, ...).
+
+    Returns
+    -------
+    list of StructureFit
+        Highest R2_mod first.
+    """
+    from battery_predictor.fitting.identifiable import ohmic_structure, with_start_value
+
+    structures: list[tuple[str, PackParams, list[Coordinate]]] = [(STRUCTURE_AS_GIVEN, params, space_for(params))]
+    alternative = ohmic_structure(params, recordings) if ohmic else None
+    if alternative is not None:
+        ohmic_params, step_ohm = alternative
+        structures.append((STRUCTURE_OHMIC, ohmic_params,
+                           with_start_value(space_for(ohmic_params), "series_resistance_ohm", step_ohm)))
+    fits = []
+    for label, structure_params, space in structures:
+        problem = IdentificationProblem(params=structure_params, recordings=recordings, simulator=simulator,
+                                        space=space, group_voltages=group_voltages)
+
+        def labelled(phase: str, evaluations: int, cost: float, label: str = label) -> None:
+            if progress is not None:
+                progress(f"{label}: {phase}", evaluations, cost)
+
+        result = identify(problem, progress=labelled, **identify_options)
+        try:
+            score: CandidateScore | None = problem.score(result.coordinates)
+        except SimulationError:
+            score = None
+        fits.append(StructureFit(label, structure_params, problem, result, score))
+    return sorted(fits, key=lambda f: -f.r2_mod)
+
+
 def jacobian_at(problem: IdentificationProblem, unit: np.ndarray, step: float = FD_STEP) -> tuple[np.ndarray,
                                                                                                 np.ndarray]:
     """Residuals and their Jacobian on the unit cube at ``unit`` (``n + 1`` evaluations)."""
@@ -669,7 +767,8 @@ def jacobian_at(problem: IdentificationProblem, unit: np.ndarray, step: float = 
     return residual(unit), _fd_jacobian(residual, np.asarray(unit, dtype=float), step)
 
 
-__all__ = ["IdentificationProblem", "IdentificationResult", "identify", "identifiability_of", "jacobian_at",
+__all__ = ["IdentificationProblem", "IdentificationResult", "StructureFit", "identify", "identify_structures",
+           "identifiability_of", "jacobian_at",
            "raw_identifiability", "startup_trials",
            "distinct_best", "ResidualGrid", "CandidateScore"]
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from battery_predictor.errors import InputDataError
 from battery_predictor.monitor.core import MonitorConfig
-from battery_predictor.recording import Recording
+from battery_predictor.recording import AS_MEASURED_STEP_RESISTANCE_KEY, Recording, as_measured_steps
 
 #: The battery monitor's default averaging window (s): what the predictor nodes are fed.
 MONITOR_WINDOW_S: float = MonitorConfig.window_s
@@ -29,7 +29,10 @@ def resample_windows(rec: Recording, window_s: float) -> Recording:
     a sample held until the next one, as :meth:`StepLoad.from_samples` reads it); voltage and each
     series group's voltage are the plain mean of the window's samples (a group's over its measured
     samples: NaN only when the group has none in the window). Each window is stamped at its first sample's time, so a
-    window's mean current holds until the next window. Windows without samples are dropped.
+    window's mean current holds until the next window. Windows without samples are dropped. The current
+    steps of the samples as measured are kept in the metadata
+    (:data:`~battery_predictor.recording.AS_MEASURED_STEP_RESISTANCE_KEY`, read by
+    :func:`~battery_predictor.recording.step_resistance_ohm`).
 
     Parameters
     ----------
@@ -79,7 +82,9 @@ def resample_windows(rec: Recording, window_s: float) -> Recording:
         current_a=weighted_mean(np.asarray(rec.current_a, dtype=float)),
         temperature_k=temperature_k,
         source=rec.source,
-        metadata={**rec.metadata, "resample_window_s": float(window_s)},
+        metadata={**rec.metadata, "resample_window_s": float(window_s),
+                  AS_MEASURED_STEP_RESISTANCE_KEY: rec.metadata.get(AS_MEASURED_STEP_RESISTANCE_KEY,
+                                                                    as_measured_steps(rec))},
         group_voltage_v=group_v,
     )
 
