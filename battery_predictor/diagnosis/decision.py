@@ -46,7 +46,8 @@ SEPARABILITY_FACTOR = 1.10
 NEAR_NOISE_FRACTION = 0.25
 #: From the smallest change of the model to the largest: one post-processed parameter (contact
 #: resistance, current offset), a second cell (imbalance), a model change (SPMe), a thermal model
-#: with two parameters, three degradation parameters, an extra state with three parameters.
+#: with two parameters, two degradation parameters that move the electrodes' state windows, an extra
+#: state with three parameters.
 SIMPLICITY_ORDER = ("resistance_growth", "current_offset", "cell_imbalance", "electrolyte_transport",
                     "temperature", "capacity_fade", "hysteresis")
 

@@ -19,8 +19,7 @@ PARAMS = Path(__file__).resolve().parents[2] / "params"
 #: One fitted value set per candidate the engine runs (far from the baseline, so a wrong mapping shows).
 THETAS = {
     "none": {},
-    "capacity_fade": {"loss_of_active_material_negative": 0.12, "loss_of_active_material_positive": 0.05,
-                      "loss_of_lithium_inventory": 0.08},
+    "capacity_fade": {"cell_capacity_loss": 0.12, "lithium_inventory_loss": 0.08},
     "resistance_growth": {"contact_resistance_ohm": 0.02},
     "current_offset": {"current_offset_a": 0.4},
     "cell_imbalance": {"weak_group_capacity_fraction": 0.8},

@@ -115,8 +115,7 @@ def test_current_offset_drives_the_model_with_the_corrected_current(temi, temi_r
 
 def test_capacity_fade_state_keeps_pybamm_soc_meaning(temi):
     eng = Engine()
-    theta = {"loss_of_active_material_negative": 0.05, "loss_of_active_material_positive": 0.03,
-             "loss_of_lithium_inventory": 0.1}
+    theta = {"cell_capacity_loss": 0.05, "lithium_inventory_loss": 0.1}
     faded = CapacityFade.faded(temi, theta)
     import pybamm
 
