@@ -558,7 +558,8 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
     With ``coarse_window_s`` and data sampled at least three times per window, the search runs on
     the data averaged over those windows (:func:`coarsened`) with ``1 - fine_fraction`` of the
     budget, and its result is refined on the data as given with the rest; otherwise on the data
-    as given only. The returned cost is the data-as-given cost.
+    as given only. The refinement starts from the coarse result or the start point, whichever fits the
+    data as given better. The returned cost is the data-as-given cost.
 
     Parameters
     ----------
@@ -600,7 +601,12 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
                                 progress=coarse_progress)
     tic = time.perf_counter()
     log = EvaluationLog(budget=n_fine)
-    cost, best = _refine(_cost_function(problem, log), first.unit, max_evaluations=n_fine)
+    residual = _cost_function(problem, log)
+    # the refinement starts from the better, on the data as given, of the coarse result and the start point
+    # (a start already at the optimum of the data as given stays there when the coarse optimum differs)
+    start = problem.unit({c.name: c.initial for c in problem.space})
+    begin = min((first.unit, start), key=lambda u: float(residual(u) @ residual(u)))
+    cost, best = _refine(residual, begin, max_evaluations=n_fine)
     history = [(label + phase, count, c) for phase, count, c in first.history]
     history.append(("refine on the data as given", first.evaluations + log.count, cost))
     if progress is not None:
