@@ -46,7 +46,6 @@ from battery_predictor.simulation.cell_setup import (
 )
 from battery_predictor.simulation.engine import EngineSimulator
 from battery_predictor.simulation.engine.pack import pack_voltage_v, series_resistance_factor
-from battery_predictor.simulation.extensions import cold_resistance_excess_ohm
 from battery_predictor.simulation.fast import THICKNESS_TO_FRACTION
 from battery_predictor.simulation.load import StepLoad
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
@@ -302,11 +301,6 @@ class Post:
         Contact resistance per cell (Ohm).
     weak_fraction : float
         Capacity fraction of the weak series group (1 = none).
-    cold_resistance_ohm : float
-        Arrhenius cell resistance at ``anchor_k`` (Ohm per cell): its excess at the cell temperature
-        (:func:`~battery_predictor.simulation.extensions.cold_resistance_excess_ohm`) drops each cell's voltage.
-    anchor_k : float
-        Temperature (K) at which ``cold_resistance_ohm`` adds nothing (where the identified model holds).
     series_activation_j_mol : float
         Arrhenius activation energy of the pack's series resistance ``R_eq`` (fitted at the
         reference temperature): at cell temperature T it is ``R_eq exp(E/R (1/T - 1/T_ref))``.
@@ -315,8 +309,6 @@ class Post:
     contact_resistance_ohm: float = 0.0
     weak_fraction: float = 1.0
     series_activation_j_mol: float = 0.0
-    cold_resistance_ohm: float = 0.0
-    anchor_k: float = 298.15
 
 
 #: Run values the SPM engine path takes as parameter values (the capacity-fade candidate's volume fractions).
@@ -381,10 +373,6 @@ def finish_run(params: PackParams, obs: Observed, t_out: np.ndarray, v_cells: li
     i_pack = obs.load.current_at(t_out) - offset_a
     i_cell = i_pack / params.parallel
     v_cells = [v - i_cell * post.contact_resistance_ohm for v in v_cells]
-    if post.cold_resistance_ohm:
-        assert temperature_k is not None  # the caller reads it whenever there is a cold resistance
-        drop = i_cell * cold_resistance_excess_ohm(post.cold_resistance_ohm, temperature_k, post.anchor_k)
-        v_cells = [v - drop for v in v_cells]
     r_eq_t: float | np.ndarray = r_eq
     if post.series_activation_j_mol:
         assert temperature_k is not None  # the caller reads it whenever there is an activation energy
@@ -645,7 +633,7 @@ class Engine:
             return "the SPM engine is switched off"
         if temperature_trace:
             return "the cell follows the measured temperature, the engine one temperature per run"
-        if post.series_activation_j_mol or post.cold_resistance_ohm:
+        if post.series_activation_j_mol:
             return "Arrhenius resistance terms"
         other = sorted((set(extra_inputs) | set(values)) - _ENGINE_VALUE_KEYS - set(_HYSTERESIS_INPUTS))
         if other:
@@ -712,7 +700,7 @@ class Engine:
         t_eval = np.minimum(t_out + 2 * _EDGE_S, obs.load.end_s - 2 * _EDGE_S)
         v_cells = [np.asarray(s["Terminal voltage [V]"](t_eval), dtype=float) for s in sols]
         temp = None
-        if want_temperature or post.series_activation_j_mol or post.cold_resistance_ohm:
+        if want_temperature or post.series_activation_j_mol:
             temp = np.asarray(sols[0]["Volume-averaged cell temperature [K]"](t_eval), dtype=float)
         reached = any(s.termination and "Minimum voltage" in str(s.termination) for s in sols)
         cutoff_v = model_cutoff_v(float(pv["Lower voltage cut-off [V]"]), obs, params.series)

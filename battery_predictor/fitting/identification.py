@@ -605,7 +605,7 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
     # the refinement starts from the better, on the data as given, of the coarse result and the start point
     # (a start already at the optimum of the data as given stays there when the coarse optimum differs)
     start = problem.unit({c.name: c.initial for c in problem.space})
-    begin = min((first.unit, start), key=lambda u: float(residual(u) @ residual(u)))
+    begin = min((first.unit, start), key=lambda u: _sum_of_squares(residual(u)))
     cost, best = _refine(residual, begin, max_evaluations=n_fine)
     history = [(label + phase, count, c) for phase, count, c in first.history]
     history.append(("refine on the data as given", first.evaluations + log.count, cost))
@@ -615,6 +615,10 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
                                 evaluations=first.evaluations + log.count, tpe_evaluations=first.tpe_evaluations,
                                 starts=first.starts + 1, seconds=first.seconds + time.perf_counter() - tic,
                                 history=history, model_seconds=first.model_seconds + log.model_seconds)
+
+
+def _sum_of_squares(r: np.ndarray) -> float:
+    return float(r @ r)
 
 
 def _identify_one_stage(problem: IdentificationProblem, *, evaluations: int, seed: int, tpe_fraction: float,

@@ -83,8 +83,9 @@ def resample_windows(rec: Recording, window_s: float) -> Recording:
         temperature_k=temperature_k,
         source=rec.source,
         metadata={**rec.metadata, "resample_window_s": float(window_s),
-                  AS_MEASURED_STEP_RESISTANCE_KEY: rec.metadata.get(AS_MEASURED_STEP_RESISTANCE_KEY,
-                                                                    as_measured_steps(rec))},
+                  AS_MEASURED_STEP_RESISTANCE_KEY: (rec.metadata[AS_MEASURED_STEP_RESISTANCE_KEY]
+                                                    if AS_MEASURED_STEP_RESISTANCE_KEY in rec.metadata
+                                                    else as_measured_steps(rec))},
         group_voltage_v=group_v,
     )
 
