@@ -8,7 +8,8 @@ when it cuts the baseline's held-out RMSE by at least :data:`GAIN_THRESHOLD_PCT`
 than :data:`NOISE_FACTOR` times the voltage noise, and either the baseline's error is clearly
 above its floor (:data:`BASELINE_FLOOR_FACTOR`) or the extension brings the held-out error back
 to that floor with a gain of at least :data:`RESTORE_MIN_GAIN_PCT` (:func:`claim_allowed`);
-otherwise the cause is ``none``.
+otherwise the cause is ``none``. A change the measurements show directly (a measured temperature
+unlike the reference's) needs only a baseline above its floor, not several times it.
 
 The procedure that fits and scores the candidates is :mod:`battery_predictor.diagnosis.diagnose`;
 the evidence text that states the verdict is :func:`battery_predictor.diagnosis.residuals.evidence_text`.
@@ -95,7 +96,8 @@ def choose_best(valid: Sequence[CandidateResult], noise_mv: float,
 MEASURED_SHIFT_K = 5.0
 
 
-def claim_allowed(base_rmse_mv: float, best_rmse_mv: float, noise_mv: float, floor_mv: float) -> bool:
+def claim_allowed(base_rmse_mv: float, best_rmse_mv: float, noise_mv: float, floor_mv: float,
+                  measured: bool = False) -> bool:
     """Whether a candidate with held-out RMSE ``best_rmse_mv`` may be named over the baseline (mV).
 
     It must cut the baseline's error by :data:`GAIN_THRESHOLD_PCT`, and either the baseline is
@@ -104,13 +106,22 @@ def claim_allowed(base_rmse_mv: float, best_rmse_mv: float, noise_mv: float, flo
     restores the floor (both by :data:`RESTORE_FACTOR`) with a gain of at least
     :data:`RESTORE_MIN_GAIN_PCT` (a cut smaller than the noise is then still a cut of the whole
     error above the floor).
+
+    ``measured``: the candidate's cause is shown by the measurements themselves (a measured
+    temperature unlike the reference's, :data:`MEASURED_SHIFT_K`). The floor factor guards against
+    naming a hypothetical knob that only fits what the reference fit left; a measured change is not
+    hypothetical, so a baseline above its floor (:data:`RESTORE_FACTOR`) with a cut of more than
+    :data:`NOISE_FACTOR` noise levels and :data:`GAIN_THRESHOLD_PCT` suffices.
     """
     if not (math.isfinite(base_rmse_mv) and math.isfinite(best_rmse_mv)) or base_rmse_mv <= 0:
         return False
     gain_pct = 100.0 * (base_rmse_mv - best_rmse_mv) / base_rmse_mv
     if gain_pct < GAIN_THRESHOLD_PCT:
         return False
-    if base_rmse_mv > BASELINE_FLOOR_FACTOR * floor_mv and base_rmse_mv - best_rmse_mv > NOISE_FACTOR * noise_mv:
+    cut_beyond_noise = base_rmse_mv - best_rmse_mv > NOISE_FACTOR * noise_mv
+    if base_rmse_mv > BASELINE_FLOOR_FACTOR * floor_mv and cut_beyond_noise:
+        return True
+    if measured and base_rmse_mv > RESTORE_FACTOR * floor_mv and cut_beyond_noise:
         return True
     # a baseline that already predicts within its floor (the reference fit's own error) shows no effect to
     # restore: a knob that predicts below the floor there fits the observed day better than the reference

@@ -554,7 +554,8 @@ def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[
     best = choose_best(valid, noise_mv, measured_first)
     cause, extended, gain = "none", base, 0.0
     floor_mv = max(noise_mv, reference.rmse_mV if reference is not None else 0.0)
-    if best is not None and claim_allowed(base.heldout_rmse_mV, best.heldout_rmse_mV, noise_mv, floor_mv):
+    if best is not None and claim_allowed(base.heldout_rmse_mV, best.heldout_rmse_mV, noise_mv, floor_mv,
+                                          measured=best.cause in measured_first):
         cause, extended, gain = best.cause, best, best.gain_pct
     # the claim must hold where the references were (mod:`coverage`): not only beyond their depth
     coverage = reference_coverage(refs, reference, obs) if reference is not None and refs else None

@@ -257,6 +257,18 @@ def test_claim_needs_a_clear_baseline_error_or_a_restored_floor(base, best, nois
     assert claim_allowed(base, best, noise, floor) is allowed
 
 
+@pytest.mark.parametrize(("base", "best", "noise", "floor", "allowed"), [
+    (18.7, 8.1, 3.0, 6.0, True),    # 3.1x the floor, cut by 57 % and 3.5 noise levels
+    (18.7, 16.0, 3.0, 6.0, False),  # 14 % gain: below the 20 % threshold
+    (6.4, 4.5, 3.0, 6.0, False),    # the baseline within 1.1x its floor: nothing to explain
+    (9.0, 6.5, 3.0, 6.0, False),    # 28 % gain, but a cut of 2.5 mV, below the 3 mV noise
+])
+def test_a_measured_change_needs_only_a_baseline_above_its_floor(base, best, noise, floor, allowed):
+    assert claim_allowed(base, best, noise, floor, measured=True) is allowed
+    # the same figures for a hypothetical cause: the baseline is not 4x its floor, nor is the floor restored
+    assert claim_allowed(base, best, noise, floor) is False
+
+
 @pytest.mark.parametrize("name", EXTENSION_NAMES)
 def test_extension_reaches_params_file_simulators_and_predictor(tmp_path, temi, name):
     """Each winner's params file loads, simulates (fast) and builds the predictor's runner."""
