@@ -24,6 +24,9 @@ hysteresis_relaxation_     log    optional, with the ``hysteresis`` extension: t
 rate_s                            state relaxes towards 0 (:data:`HYSTERESIS_RELAX_RANGE_S`)
 hysteresis_activation_     lin    optional, with the ``hysteresis`` extension: the activation energy of its
 energy_j_mol                      half-width (:data:`HYSTERESIS_ACTIVATION_RANGE_J_MOL`)
+electrolyte_bruggeman      lin    with the ``electrolyte_transport`` extension (SPMe): the electrolyte's Bruggeman
+                                  exponent ``b`` of every region (effective conductivity and diffusivity
+                                  ``eps ** b`` times the bulk's), searched in :data:`ELECTROLYTE_BRUGGEMAN_RANGE`
 weak_group_capacity_      lin    with the ``cell_imbalance`` extension: the capacity of the one weak series
 fraction                          group as a fraction of the others' (:data:`WEAK_GROUP_FRACTION_RANGE`); a
                                   pack whose test or BMS stops on its weakest group ends where that group
@@ -121,8 +124,14 @@ HYSTERESIS_ACTIVATION_RANGE_J_MOL = (0.0, 80000.0)
 #: Search range of the weak series group's capacity fraction (extension ``cell_imbalance``; linear).
 WEAK_GROUP_FRACTION_RANGE = (0.5, 1.0)
 _IMBALANCE_KEYS = {"weak_group_capacity_fraction": "Weak series group capacity fraction"}
+#: Search range of the electrolyte's Bruggeman exponent (extension ``electrolyte_transport``; linear): from the
+#: ideal packing's 1.0 to 4.0, where Chen2020's negative electrode (porosity 0.25) conducts 0.4 % of the bulk
+#: electrolyte (an electrolyte resistance of about 0.1 Ohm in an 18650).
+ELECTROLYTE_BRUGGEMAN_RANGE = (1.0, 4.0)
+_ELECTROLYTE_KEYS = {"electrolyte_bruggeman": "Electrolyte Bruggeman coefficient [-]"}
 #: Extension -> its always-searched coordinates (name -> extension key in ``cell.extra``).
-_EXTENSION_KEYS = {"hysteresis": _HYSTERESIS_KEYS, "cell_imbalance": _IMBALANCE_KEYS}
+_EXTENSION_KEYS = {"hysteresis": _HYSTERESIS_KEYS, "cell_imbalance": _IMBALANCE_KEYS,
+                   "electrolyte_transport": _ELECTROLYTE_KEYS}
 #: Optional hysteresis coordinates -> (extension key, search range, log scale).
 _HYSTERESIS_OPTIONAL = {
     "hysteresis_relaxation_rate_s": ("Positive electrode hysteresis relaxation rate [s-1]", HYSTERESIS_RELAX_RANGE_S, True),
@@ -314,6 +323,9 @@ def default_space(params: PackParams, recordings: Sequence[Recording] = (),
                               *HYSTERESIS_HALF_WIDTH_RANGE_V, log=False))
         space.append(_widened("hysteresis_decay_rate", shipped["hysteresis_decay_rate"], *HYSTERESIS_DECAY_RANGE,
                               log=True))
+    if "electrolyte_transport" in params.extensions:
+        space.append(_widened("electrolyte_bruggeman", shipped["electrolyte_bruggeman"], *ELECTROLYTE_BRUGGEMAN_RANGE,
+                              log=False))
     if "cell_imbalance" in params.extensions:
         space.append(_widened("weak_group_capacity_fraction", shipped["weak_group_capacity_fraction"],
                               *WEAK_GROUP_FRACTION_RANGE, log=False))
@@ -500,7 +512,7 @@ def pybamm_values(params: PackParams, coordinates: Mapping[str, float], n_record
         if name in coordinates:
             shared[key] = c[name]
     shared.update(kinetic_values(params, coordinates))
-    for name, key in {**_HYSTERESIS_KEYS, **_IMBALANCE_KEYS}.items():
+    for name, key in {**_HYSTERESIS_KEYS, **_IMBALANCE_KEYS, **_ELECTROLYTE_KEYS}.items():
         if name in coordinates:
             shared[key] = c[name]
     for name, (key, _, _) in _HYSTERESIS_OPTIONAL.items():

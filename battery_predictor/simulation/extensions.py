@@ -310,7 +310,8 @@ def with_cold_window_anchors(params: PackParams) -> PackParams:
 #: Extension keys a fit may search (``fitting.identifiable``), by extension.
 FITTED_EXTENSION_KEYS: dict[str, tuple[str, ...]] = {"hysteresis": (HYS_HALF_WIDTH, HYS_DECAY, HYS_INITIAL, HYS_RELAX,
                                                                     HYS_ACTIVATION),
-                                                     "cell_imbalance": (WEAK_FRACTION,)}
+                                                     "cell_imbalance": (WEAK_FRACTION,),
+                                                     "electrolyte_transport": (BRUGGEMAN,)}
 
 
 def with_fitted_extension_keys(params: PackParams) -> PackParams:

@@ -34,7 +34,13 @@ from battery_predictor.simulation.cell_setup import (
     quiet_pybamm,
 )
 from battery_predictor.simulation.engine.pack import pack_voltage_v
-from battery_predictor.simulation.extensions import series_resistance_factor, weak_group_fraction, weak_group_params
+from battery_predictor.simulation.extensions import (
+    BRUGGEMAN,
+    BRUGGEMAN_KEYS,
+    series_resistance_factor,
+    weak_group_fraction,
+    weak_group_params,
+)
 from battery_predictor.simulation.load import StepLoad
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
@@ -114,6 +120,8 @@ class FastPackSimulator:
         input_keys = set(ALWAYS_INPUT_KEYS) | (INPUT_SAFE_KEYS & set(params.cell_values))
         if mapped:
             input_keys |= set(THICKNESS_TO_FRACTION.values())
+        if "electrolyte_transport" in params.extensions:  # a fitted Bruggeman exponent re-solves the built SPMe
+            input_keys |= set(BRUGGEMAN_KEYS)
         inputs = {}
         for key in sorted(input_keys):
             if key in ("Ambient temperature [K]", "Initial temperature [K]"):
@@ -171,6 +179,8 @@ class FastPackSimulator:
 
         load = request.load
         skip = set(input_keys) | (set(THICKNESS_TO_FRACTION) if mapped else set())
+        if set(BRUGGEMAN_KEYS) <= skip:
+            skip.add(BRUGGEMAN)
         fixed = tuple(sorted((k, repr(v)) for k, v in params.cell_values.items() if k not in skip))
         key = (params.base_parameter_set, params.model, repr(sorted(params.options.items())), params.extensions,
                fixed, input_keys, load.digest(), params.parallel, mapped)
