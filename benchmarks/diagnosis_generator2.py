@@ -24,7 +24,8 @@ sys.path.insert(0, str(REPO / "test" / "integration"))
 
 from diagnosis_generator2 import ROBOT_EFFECTS, ROBOTS, make_case  # noqa: E402
 
-CLI = str(Path(sys.executable).parent / "battery-predictor")
+#: The CLI run by this interpreter (its PYTHONPATH and environment), not the venv's entry-point script.
+CLI = [sys.executable, "-m", "battery_predictor.cli.main"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -46,7 +47,7 @@ def main(argv: list[str] | None = None) -> int:
                     continue
                 with tempfile.TemporaryDirectory() as tmp:
                     case = make_case(effect, robot, seed, Path(tmp))
-                    cmd = [CLI, "diagnose", "--params", str(case.params_path), "--reference", str(case.reference_csv),
+                    cmd = [*CLI, "diagnose", "--params", str(case.params_path), "--reference", str(case.reference_csv),
                            "--data", str(case.observed_csv), "--json", "--quiet"]
                     if args.workers:
                         cmd += ["--workers", str(args.workers)]

@@ -29,6 +29,7 @@ from battery_predictor.diagnosis.engine import (
     Observed,
     Post,
     SimOut,
+    discharge_throughput_ah,
 )
 from battery_predictor.fitting.space import unit_to_value, value_to_unit
 from battery_predictor.params import PackParams, cached_parameter_values
@@ -391,7 +392,66 @@ class ElectrolyteTransport(Candidate):
         return self._with_extension(params, {ext.BRUGGEMAN: theta["bruggeman_exponent"]})
 
 
+#: Hysteresis time constants (in charge) a discharge-only fit part must span: ``exp(-3)``, the state within
+#: 5 % of its discharge branch (settled) by the end of the fit part.
+SETTLING_TIME_CONSTANTS = 3.0
+#: A fit part charges when its current goes below minus this C-rate (of the pack's nominal capacity).
+CHARGE_C_RATE = 0.02
+#: Bounds of the hysteresis decay rate K (per unit positive-electrode stoichiometry).
+HYS_DECAY_BOUNDS = (1.0, 1000.0)
+
+
+def fit_part_charges(params: PackParams, obs: Observed) -> bool:
+    """Whether the fit part of ``obs`` holds a charge (current below ``-CHARGE_C_RATE`` C, A)."""
+    cap = float(params.pack_info.get("nominal_capacity_ah") or 0.0) or 1.0
+    return bool(np.any(obs.i[obs.fit_mask] < -CHARGE_C_RATE * cap))
+
+
+def settling_decay_rate(params: PackParams, observed: Sequence[Observed]) -> float:
+    """The smallest hysteresis decay rate K whose state settles within a discharge-only fit part (-).
+
+    Discharging moves the one-state hysteresis towards its discharge branch as ``exp(-K q / Q_p)``
+    (``q`` the charge discharged per cell, ``Q_p`` the positive electrode's theoretical charge,
+    :func:`~battery_predictor.simulation.extensions.hysteresis_positive_charge_c`). When no fit part
+    holds a charge, that relaxation from an unknown initial state is all the fit sees of a hysteresis:
+    one that has not settled by the end of the fit part is an exponential drift over the whole
+    discharge, a smooth function of the charge drawn that any error of the model's shape along the
+    discharge (a weak series group diverging, an open-circuit voltage off) also is, and it carries
+    that drift into the held-out part. The rate must then span :data:`SETTLING_TIME_CONSTANTS` time
+    constants within the largest fit-part discharge, ``K >= n Q_p / q_fit``. A charge in a fit part
+    reverses the state, which tells a hysteresis from a shape error; the rate is then free
+    (the lower bound of :data:`HYS_DECAY_BOUNDS`).
+
+    Parameters
+    ----------
+    params : PackParams
+        The pack model (its positive electrode gives ``Q_p``, C).
+    observed : sequence of Observed
+        The recordings a fit sees (current in A, discharge positive; fit parts up to ``t_split``, s).
+
+    Returns
+    -------
+    float
+        The lower bound of the decay rate K (per unit stoichiometry).
+    """
+    low = HYS_DECAY_BOUNDS[0]
+    if not observed or any(fit_part_charges(params, o) for o in observed):
+        return low
+    q_fit_c = max(float(discharge_throughput_ah(o.t[o.fit_mask], o.i[o.fit_mask])[-1]) for o in observed
+                  ) * 3600.0 / params.parallel
+    if q_fit_c <= 0.0:
+        return low
+    q_p_c = ext.hysteresis_positive_charge_c(cached_parameter_values(params))
+    return max(low, SETTLING_TIME_CONSTANTS * q_p_c / q_fit_c)
+
+
 class Hysteresis(Candidate):
+    """PyBaMM's one-state OCP hysteresis in the positive electrode (the ``hysteresis`` extension).
+
+    On recordings whose fit parts only discharge, the decay rate is bounded below so that the state
+    settles within the fit part (:func:`settling_decay_rate`).
+    """
+
     name = "hysteresis"
     title = ("one-state OCP hysteresis in the positive electrode (PyBaMM 'Axen' option): half-width, decay "
              "rate, initial branch")
@@ -399,9 +459,18 @@ class Hysteresis(Candidate):
     starts = 2
 
     def parameters(self, params: PackParams, observed: Sequence[Observed] | None = None) -> tuple[CandParam, ...]:
+        high = HYS_DECAY_BOUNDS[1]
+        # beyond half the upper bound the candidate does not apply (:meth:`applicable`)
+        low = min(settling_decay_rate(params, observed or ()), 0.5 * high)
         return (CandParam("hysteresis_half_width_v", 0.0, 0.05, 0.005, unit="V per cell"),
-                CandParam("hysteresis_decay_rate", 1.0, 1000.0, 30.0, log=True, unit="per unit stoichiometry"),
+                CandParam("hysteresis_decay_rate", low, high, max(30.0, low), log=True, unit="per unit stoichiometry"),
                 CandParam("initial_hysteresis_state", -1.0, 1.0, -0.9))
+
+    def applicable(self, params: PackParams, observed: list[Observed]) -> str | None:
+        if settling_decay_rate(params, observed) > 0.5 * HYS_DECAY_BOUNDS[1]:
+            return ("the fit parts only discharge, and too little for a hysteresis to settle within them at a decay "
+                    f"rate below half the largest ({0.5 * HYS_DECAY_BOUNDS[1]:.0f})")
+        return None
 
     def start_points(self, params: PackParams, rng: np.random.Generator,
                      observed: Sequence[Observed] | None = None) -> list[dict[str, float]]:

@@ -10,7 +10,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.diagnosis.candidates import CANDIDATES, CapacityFade, CellImbalance, ResistanceGrowth, candidate
+from battery_predictor.diagnosis.candidates import (
+    CANDIDATES,
+    HYS_DECAY_BOUNDS,
+    SETTLING_TIME_CONSTANTS,
+    CapacityFade,
+    CellImbalance,
+    Hysteresis,
+    ResistanceGrowth,
+    candidate,
+    fit_part_charges,
+    settling_decay_rate,
+)
 from battery_predictor.diagnosis.decision import SIMPLICITY_ORDER, choose_best, claim_allowed, excess_mv
 from battery_predictor.diagnosis.engine import Engine, Post, ends_at_cutoff, observe
 from battery_predictor.diagnosis.lsq import ParallelEvaluator, budgeted_least_squares
@@ -333,3 +344,39 @@ def test_temperature_extension_lowers_the_voltage_in_the_cold(temi):
 def test_cell_imbalance_not_applicable_to_a_single_cell():
     lgm50 = load_params(PARAMS / "lgm50.yaml")
     assert CellImbalance().applicable(lgm50, []) is not None
+
+
+def _observed_steps(params, currents_a, durations_s, dt_s=10.0):
+    """A recording of piecewise-constant pack currents (A, discharge positive) with a flat voltage, observed."""
+    load = StepLoad.from_durations(list(durations_s), list(currents_a))
+    t = np.arange(0.0, load.end_s, dt_s)
+    i = load.current_at(t)
+    rec = Recording(time_s=t, voltage_v=np.full(t.size, 3.7 * params.series), current_a=i,
+                    temperature_k=np.full(t.size, 298.15))
+    return observe(rec, params)
+
+
+def test_hysteresis_settles_within_a_discharge_only_fit_part(temi):
+    obs = _observed_steps(temi, [8.0, 2.0, 5.0, 0.0, 6.0], [1800.0, 1200.0, 1800.0, 600.0, 1800.0])
+    decay = {p.name: p for p in Hysteresis().parameters(temi, [obs])}["hysteresis_decay_rate"]
+    assert decay.low == pytest.approx(settling_decay_rate(temi, [obs]))
+    assert decay.low > HYS_DECAY_BOUNDS[0] and decay.low <= decay.initial <= decay.high
+    # at the lowest rate the state has moved SETTLING_TIME_CONSTANTS time constants from the charge branch
+    fit = obs.t[obs.fit_mask]
+    pv = temi.parameter_values()
+    rate = decay.low / ext.hysteresis_positive_charge_c(pv)
+    h = ext.hysteresis_states(1.0, np.diff(fit), obs.i[obs.fit_mask][:-1] / temi.parallel, rate)
+    assert (h[-1] + 1.0) / 2.0 == pytest.approx(math.exp(-SETTLING_TIME_CONSTANTS), rel=0.02)
+    assert Hysteresis().applicable(temi, [obs]) is None
+
+
+def test_hysteresis_decay_rate_is_free_when_a_fit_part_charges(temi):
+    obs = _observed_steps(temi, [8.0, -5.0, 5.0, 6.0], [1800.0, 1200.0, 1800.0, 1800.0])
+    assert fit_part_charges(temi, obs)
+    assert Hysteresis().parameters(temi, [obs]) == Hysteresis().parameters(temi)
+    assert Hysteresis().parameters(temi)[1].low == HYS_DECAY_BOUNDS[0]
+
+
+def test_hysteresis_not_applicable_when_the_fit_part_barely_discharges(temi):
+    obs = _observed_steps(temi, [0.0, 0.05, 0.0], [1800.0, 60.0, 1800.0])
+    assert Hysteresis().applicable(temi, [obs]) is not None
