@@ -1,0 +1,55 @@
+"""The rescoring of stored diagnoses (benchmarks/diagnosis_rescore.py) decides as the diagnosis does."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+from battery_predictor.diagnosis import decision
+
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "diagnosis_rescore.py"
+
+
+@pytest.fixture(scope="module")
+def rescore():
+    spec = importlib.util.spec_from_file_location("diagnosis_rescore", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def case(baseline_mv, candidates, reference_mv=6.0, noise_mv=3.0, shift_k=0.0, truth="resistance_growth"):
+    return {"label": "tuning", "seed": 0, "robot": "temi", "truth": truth, "named": "?", "noise_mv": noise_mv,
+            "reference_rmse_mv": reference_mv, "temperature_shift_k": shift_k, "baseline_mv": baseline_mv,
+            "candidates": candidates, "coverage": None}
+
+
+def test_a_clear_cut_names_the_simplest_candidate_within_the_margin(rescore):
+    # 40 mV baseline, 6.7x its floor; two candidates within 10 % of each other: the simpler one
+    assert rescore.decide(case(40.0, {"hysteresis": 8.0, "resistance_growth": 8.3, "temperature": 30.0})) \
+        == "resistance_growth"
+
+
+def test_a_baseline_within_its_floor_names_nothing_and_a_measured_temperature_does(rescore):
+    assert rescore.decide(case(18.7, {"temperature": 8.1, "hysteresis": 15.0})) == "none"
+    assert rescore.decide(case(18.7, {"temperature": 8.1, "hysteresis": 15.0}, shift_k=-18.0)) == "temperature"
+
+
+def test_a_constant_set_for_the_rescoring_changes_the_decision(rescore, tmp_path, monkeypatch, capsys):
+    path = tmp_path / "cases.jsonl"
+    path.write_text(json.dumps(case(19.5, {"resistance_growth": 7.1}, reference_mv=5.2)) + "\n")
+    monkeypatch.setattr(decision, "RESTORE_FACTOR", decision.RESTORE_FACTOR)  # restored after the test
+    assert rescore.main(["score", str(path)]) == 0
+    assert "right cause: 0 of 1" in capsys.readouterr().out
+    assert rescore.main(["score", str(path), "--set", "RESTORE_FACTOR=1.4"]) == 0
+    assert "right cause: 1 of 1" in capsys.readouterr().out
+
+
+def test_the_stored_cases_file_reads(rescore):
+    stored = SCRIPT.parents[1] / "docs" / "diagnosis_issue12" / "decision_cases.jsonl"
+    cases = [json.loads(line) for line in stored.read_text().splitlines()]
+    assert {c["label"] for c in cases} == {"tuning", "verdict"}
+    assert all(rescore.decide(c) for c in cases)
