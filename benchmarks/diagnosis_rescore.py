@@ -9,8 +9,8 @@ effect being the truth); ``collect`` keeps the fields the decision reads in one 
     python benchmarks/diagnosis_rescore.py collect DIR... --label tuning --out cases.jsonl
     python benchmarks/diagnosis_rescore.py score cases.jsonl [--label tuning] [--set RESTORE_FACTOR=1.3 ...]
 
-The rescoring follows ``diagnosis.diagnose._decide``: the simplest candidate within the separability
-margin (a measured temperature shift first), then ``claim_allowed``. The coverage rule (no claim beyond
+The rescoring calls the diagnosis's own ``decision.name_cause`` (the simplest candidate within the
+separability margin, a measured temperature shift first, then ``claim_allowed``). The coverage rule (no claim beyond
 the references' depth) is applied from the recorded figures when the case's original claim was the same
 cause; for another cause the recorded figures do not exist and the case is marked ``coverage?``.
 Never tune a constant on the seeds that then judge it: label the verdict seeds and keep them out of the
@@ -56,17 +56,13 @@ def decide(case: dict[str, Any]) -> str:
     valid = [SimpleNamespace(cause=c, heldout_rmse_mV=float(v)) for c, v in case["candidates"].items()
              if v is not None and math.isfinite(float(v))]
     shift = case["temperature_shift_k"]
-    measured_first = ("temperature",) if shift is not None and abs(shift) > decision.MEASURED_SHIFT_K else ()
-    best = decision.choose_best(valid, noise, measured_first)  # type: ignore[arg-type]
-    if best is None:
-        return "none"
     ref = case["reference_rmse_mv"]
     floor = max(noise, float(ref) if ref is not None else 0.0)
-    base = float(case["baseline_mv"])
-    if not decision.claim_allowed(base, best.heldout_rmse_mV, noise, floor, measured=best.cause in measured_first):
+    best, cause = decision.name_cause(valid, float(case["baseline_mv"]), noise, floor, shift)  # type: ignore[arg-type]
+    if best is None or cause == "none":
         return "none"
     cov = case["coverage"]
-    if cov and cov.get("baseline_rmse_mV") is not None and best.cause not in measured_first:
+    if cov and cov.get("baseline_rmse_mV") is not None and best.cause not in decision.measured_causes(shift):
         if cov.get("cause") != best.cause:
             return best.cause + " (coverage?)"
         if not decision.claim_allowed(cov["baseline_rmse_mV"], cov["cause_rmse_mV"], noise, floor):

@@ -96,6 +96,28 @@ def choose_best(valid: Sequence[CandidateResult], noise_mv: float,
 MEASURED_SHIFT_K = 5.0
 
 
+def measured_causes(temperature_shift_k: float | None) -> tuple[str, ...]:
+    """The causes the measurements show directly: ``temperature`` when the observed recordings' mean
+    measured temperature differs from the references' by more than :data:`MEASURED_SHIFT_K` (K)."""
+    if temperature_shift_k is not None and abs(temperature_shift_k) > MEASURED_SHIFT_K:
+        return ("temperature",)
+    return ()
+
+
+def name_cause(valid: Sequence[CandidateResult], base_rmse_mv: float, noise_mv: float, floor_mv: float,
+               temperature_shift_k: float | None) -> tuple[CandidateResult | None, str]:
+    """The best candidate (:func:`choose_best`) and the cause named on the whole held-out part (mV, K).
+
+    The cause is the best candidate's when :func:`claim_allowed` lets it over the baseline, else ``none``.
+    """
+    measured = measured_causes(temperature_shift_k)
+    best = choose_best(valid, noise_mv, measured)
+    if best is not None and claim_allowed(base_rmse_mv, best.heldout_rmse_mV, noise_mv, floor_mv,
+                                          measured=best.cause in measured):
+        return best, best.cause
+    return best, "none"
+
+
 def claim_allowed(base_rmse_mv: float, best_rmse_mv: float, noise_mv: float, floor_mv: float,
                   measured: bool = False) -> bool:
     """Whether a candidate with held-out RMSE ``best_rmse_mv`` may be named over the baseline (mV).

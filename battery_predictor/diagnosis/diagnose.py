@@ -53,9 +53,8 @@ from battery_predictor.diagnosis.candidates import CANDIDATES, Baseline, Candida
 from battery_predictor.diagnosis.coverage import covered_claim, measured_text, reference_coverage, refusal_text
 from battery_predictor.diagnosis.decision import (
     GAIN_THRESHOLD_PCT,
-    MEASURED_SHIFT_K,
-    choose_best,
-    claim_allowed,
+    measured_causes,
+    name_cause,
     near_lowest,
 )
 from battery_predictor.diagnosis.engine import (
@@ -539,7 +538,7 @@ def _candidate_results(tasks: Sequence[tuple[int, Candidate]], fitted: dict[str,
 def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[Observed],
             reference: ReferenceFit | None, base: CandidateResult, results: list[CandidateResult],
             run: dict[str, Any]) -> Diagnosis:
-    """Name the cause (:func:`choose_best`, :func:`claim_allowed`) and write the evidence.
+    """Name the cause (:func:`name_cause`) and write the evidence.
 
     ``run`` holds the :class:`Diagnosis` fields of the run itself (``seconds``, ``budget``,
     ``fit_fraction``, ``split``).
@@ -550,13 +549,10 @@ def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[
     shift_k = None
     if refs and all(o.temperature_k is not None for o in obs) and all(r.temperature_k is not None for r in refs):
         shift_k = float(np.mean([o.mean_temperature_k for o in obs]) - np.mean([r.mean_temperature_k for r in refs]))
-    measured_first = ("temperature",) if shift_k is not None and abs(shift_k) > MEASURED_SHIFT_K else ()
-    best = choose_best(valid, noise_mv, measured_first)
-    cause, extended, gain = "none", base, 0.0
+    measured_first = measured_causes(shift_k)
     floor_mv = max(noise_mv, reference.rmse_mV if reference is not None else 0.0)
-    if best is not None and claim_allowed(base.heldout_rmse_mV, best.heldout_rmse_mV, noise_mv, floor_mv,
-                                          measured=best.cause in measured_first):
-        cause, extended, gain = best.cause, best, best.gain_pct
+    best, cause = name_cause(valid, base.heldout_rmse_mV, noise_mv, floor_mv, shift_k)
+    extended, gain = (best, best.gain_pct) if cause != "none" and best is not None else (base, 0.0)
     # the claim must hold where the references were (mod:`coverage`): not only beyond their depth
     coverage = reference_coverage(refs, reference, obs) if reference is not None and refs else None
     refusal = caveat = None

@@ -42,9 +42,9 @@ if TYPE_CHECKING:
 from battery_predictor.diagnosis.decision import (
     BASELINE_FLOOR_FACTOR,
     GAIN_THRESHOLD_PCT,
-    MEASURED_SHIFT_K,
     RESTORE_FACTOR,
     RESTORE_MIN_GAIN_PCT,
+    measured_causes,
 )
 
 #: Window (s) of the "direction of recent current" feature.
@@ -243,7 +243,7 @@ def evidence_text(cause: str, base: CandidateResult, best: CandidateResult | Non
         parts.append("Next best: " + ", ".join(f"{r.cause} {r.heldout_rmse_mV:.1f} mV ({r.gain_pct:+.1f} %)"
                                                for r in others) + ".")
     floor = noise_mv if floor_mv is None else floor_mv
-    if (cause == "temperature" and temperature_shift_k is not None and abs(temperature_shift_k) > MEASURED_SHIFT_K
+    if (temperature_shift_k is not None and cause in measured_causes(temperature_shift_k)
             and base.heldout_rmse_mV <= BASELINE_FLOOR_FACTOR * floor):
         parts.append(f"The baseline is within {BASELINE_FLOOR_FACTOR:.0f}x its error floor ({floor:.1f} mV); the "
                      f"cause is named because the measured temperature differs from the reference's by "
