@@ -7,7 +7,7 @@ effect being the truth); ``collect`` keeps the fields the decision reads in one 
 ``score`` decides each case again and prints the right-cause count, the claims on ``none`` and the misses.
 
     python benchmarks/diagnosis_rescore.py collect DIR... --label tuning --out cases.jsonl
-    python benchmarks/diagnosis_rescore.py score cases.jsonl [--label tuning] [--set RESTORE_FACTOR=1.3 ...]
+    python benchmarks/diagnosis_rescore.py score cases.jsonl [--label tuning] [--set BASELINE_FLOOR_FACTOR=3 ...]
 
 The rescoring calls the diagnosis's own ``decision.name_cause`` (the simplest candidate within the
 separability margin, a measured temperature shift first, then ``claim_allowed``). The coverage rule (no claim beyond
@@ -45,6 +45,7 @@ def case_record(path: Path, label: str) -> dict[str, Any] | None:
         "noise_mv": d["noise_mV"], "reference_rmse_mv": (d.get("reference_fit") or {}).get("rmse_mV"),
         "temperature_shift_k": d.get("temperature_shift_k"), "baseline_mv": d["baseline"]["heldout_rmse_mV"],
         "candidates": {c["cause"]: c["heldout_rmse_mV"] for c in d["candidates"]},
+        "unresolved": sorted(c["cause"] for c in d["candidates"] if c.get("unresolved")),
         "coverage": {k: cov.get(k) for k in ("leaves_range", "cause", "baseline_rmse_mV", "cause_rmse_mV")}
         if cov else None,
     }
@@ -53,8 +54,9 @@ def case_record(path: Path, label: str) -> dict[str, Any] | None:
 def decide(case: dict[str, Any]) -> str:
     """The cause named for ``case`` by the decision module's present rule and constants."""
     noise = float(case["noise_mv"])
+    unresolved = set(case.get("unresolved", ()))  # below the instruments' resolution: never named
     valid = [SimpleNamespace(cause=c, heldout_rmse_mV=float(v)) for c, v in case["candidates"].items()
-             if v is not None and math.isfinite(float(v))]
+             if v is not None and math.isfinite(float(v)) and c not in unresolved]
     shift = case["temperature_shift_k"]
     ref = case["reference_rmse_mv"]
     floor = max(noise, float(ref) if ref is not None else 0.0)
@@ -65,7 +67,7 @@ def decide(case: dict[str, Any]) -> str:
     if cov and cov.get("baseline_rmse_mV") is not None and best.cause not in decision.measured_causes(shift):
         if cov.get("cause") != best.cause:
             return best.cause + " (coverage?)"
-        if not decision.claim_allowed(cov["baseline_rmse_mV"], cov["cause_rmse_mV"], noise, floor):
+        if not decision.claim_allowed(cov["baseline_rmse_mV"], cov["cause_rmse_mV"], noise, floor, measured=True):
             return "none"
     return best.cause
 

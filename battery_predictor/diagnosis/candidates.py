@@ -31,6 +31,7 @@ from battery_predictor.diagnosis.engine import (
     SimOut,
     discharge_throughput_ah,
 )
+from battery_predictor.diagnosis.scoring import current_resolution_a
 from battery_predictor.fitting.space import unit_to_value, value_to_unit
 from battery_predictor.params import PackParams, cached_parameter_values
 from battery_predictor.simulation import extensions as ext
@@ -95,6 +96,11 @@ class Candidate:
 
     def applicable(self, params: PackParams, observed: list[Observed]) -> str | None:
         """None when the candidate applies, else the reason it does not."""
+        return None
+
+    def unresolved(self, fitted: dict[str, float], observed: Sequence[Observed]) -> str | None:
+        """None when the fitted effect (:meth:`fitted`'s values) is larger than the instruments resolve,
+        else why it is not: such a candidate is scored and reported but never named."""
         return None
 
     def structure(self, params: PackParams) -> PackParams:
@@ -342,6 +348,15 @@ class CurrentOffset(Candidate):
 
     def run_arguments(self, params: PackParams, theta: dict[str, float]) -> dict[str, Any]:
         return {"offset_a": theta["current_offset_a"]}
+
+    def unresolved(self, fitted: dict[str, float], observed: Sequence[Observed]) -> str | None:
+        # a reading quantised to q is itself biased by up to q/2 wherever the current dwells between two levels
+        quantum_a = current_resolution_a(observed)
+        offset_a = abs(float(fitted.get("current_offset_a", 0.0)))
+        if offset_a <= 0.5 * quantum_a:
+            return (f"the fitted offset ({offset_a:.3f} A) is within half the current reading's {quantum_a:.3g} A "
+                    "step, the bias quantisation alone gives a reading")
+        return None
 
     def extended_params(self, params: PackParams, theta: dict[str, float], socs: list[float],
                         engine: Engine) -> PackParams:

@@ -144,7 +144,8 @@ def covered_claim(coverage: Coverage, cause: str, observed: Sequence[Observed], 
 
     Always true when no observed recording goes deeper than the references. Otherwise the baseline's
     and the cause's held-out RMSEs are recomputed on the covered samples and the claim must pass
-    :func:`~battery_predictor.diagnosis.decision.claim_allowed` there with the same noise and floor;
+    :func:`~battery_predictor.diagnosis.decision.claim_allowed` there with the same noise and floor (the
+    test for a change shown directly: the claim on the whole held-out part has already passed);
     with no covered held-out sample it fails. Records the figures and the outcome in ``coverage``.
     """
     if not coverage.leaves_range:
@@ -156,7 +157,7 @@ def covered_claim(coverage: Coverage, cause: str, observed: Sequence[Observed], 
     b = covered_rmse_mv(observed, base_sims, coverage.covered_until_s)
     c = covered_rmse_mv(observed, cause_sims, coverage.covered_until_s)
     coverage.baseline_rmse_mV, coverage.cause_rmse_mV = b, c
-    coverage.refused = not claim_allowed(b, c, noise_mv, floor_mv)
+    coverage.refused = not claim_allowed(b, c, noise_mv, floor_mv, measured=True)  # the whole part passed
     return not coverage.refused
 
 

@@ -5,11 +5,10 @@ above the voltage noise (:func:`excess_mv`), which no model can predict. Among t
 whose excess error is within :data:`SEPARABILITY_FACTOR` (plus :data:`NEAR_NOISE_FRACTION` of
 the noise) of the lowest, the simplest (:data:`SIMPLICITY_ORDER`) is the best one. It is named
 when it cuts the baseline's held-out RMSE by at least :data:`GAIN_THRESHOLD_PCT` and by more
-than :data:`NOISE_FACTOR` times the voltage noise, and either the baseline's error is clearly
-above its floor (:data:`BASELINE_FLOOR_FACTOR`) or the extension brings the held-out error back
-to that floor with a gain of at least :data:`RESTORE_MIN_GAIN_PCT` (:func:`claim_allowed`);
-otherwise the cause is ``none``. A change the measurements show directly (a measured temperature
-unlike the reference's) needs only a baseline above its floor, not several times it.
+than :data:`NOISE_FACTOR` times the voltage noise, and the baseline's error is clearly above its
+floor (:data:`BASELINE_FLOOR_FACTOR`, :func:`claim_allowed`); otherwise the cause is ``none``. A
+change the measurements show directly (a measured temperature unlike the reference's) needs only a
+baseline above its floor (:data:`FLOOR_MARGIN`), not several times it.
 
 The procedure that fits and scores the candidates is :mod:`battery_predictor.diagnosis.diagnose`;
 the evidence text that states the verdict is :func:`battery_predictor.diagnosis.residuals.evidence_text`.
@@ -32,13 +31,14 @@ NOISE_FACTOR = 1.0
 #: ... and the baseline's held-out RMSE must exceed this many times its error floor: the larger of
 #: the voltage noise and the baseline's RMSE on the reference data (what the model achieves when
 #: nothing has changed). Below that, the residual left by the reference fit itself is what a
-#: candidate would explain.
-BASELINE_FLOOR_FACTOR = 4.0
-#: ... unless the extension *restores* the floor: its held-out RMSE at most this many times the floor
-#: (what the reference model achieved on the reference data, or the noise) while cutting the
-#: baseline's by at least :data:`RESTORE_MIN_GAIN_PCT`.
-RESTORE_FACTOR = 1.10
-RESTORE_MIN_GAIN_PCT = 30.0
+#: candidate would explain. The floor is an in-sample figure; on another day a correct model's
+#: held-out error is larger: 0.87-1.82 times the floor on the second generator's days without an
+#: effect (tuning seeds 0-2 and 100-109, 18 days); 2.5 lies above all of them by a third.
+BASELINE_FLOOR_FACTOR = 2.5
+#: A baseline within this factor of its floor shows nothing to explain, even for a measured change.
+#: (A candidate that merely brings the held-out error back near the in-sample floor is not evidence
+#: of a cause: any fitted knob absorbs part of a correct model's larger error on another day.)
+FLOOR_MARGIN = 1.10
 #: Candidates whose excess held-out error (above the noise) is within this factor of the lowest, plus
 #: :data:`NEAR_NOISE_FRACTION` of the noise, are not separable; the simplest of them is named.
 SEPARABILITY_FACTOR = 1.10
@@ -122,31 +122,20 @@ def claim_allowed(base_rmse_mv: float, best_rmse_mv: float, noise_mv: float, flo
                   measured: bool = False) -> bool:
     """Whether a candidate with held-out RMSE ``best_rmse_mv`` may be named over the baseline (mV).
 
-    It must cut the baseline's error by :data:`GAIN_THRESHOLD_PCT`, and either the baseline is
-    clearly above its floor (:data:`BASELINE_FLOOR_FACTOR`) and the cut exceeds
-    :data:`NOISE_FACTOR` noise levels, or the baseline is above its floor and the candidate
-    restores the floor (both by :data:`RESTORE_FACTOR`) with a gain of at least
-    :data:`RESTORE_MIN_GAIN_PCT` (a cut smaller than the noise is then still a cut of the whole
-    error above the floor).
+    It must cut the baseline's error by :data:`GAIN_THRESHOLD_PCT` and by more than :data:`NOISE_FACTOR`
+    noise levels, and the baseline must be clearly above its floor (:data:`BASELINE_FLOOR_FACTOR`).
 
     ``measured``: the candidate's cause is shown by the measurements themselves (a measured
     temperature unlike the reference's, :data:`MEASURED_SHIFT_K`). The floor factor guards against
-    naming a hypothetical knob that only fits what the reference fit left; a measured change is not
-    hypothetical, so a baseline above its floor (:data:`RESTORE_FACTOR`) with a cut of more than
-    :data:`NOISE_FACTOR` noise levels and :data:`GAIN_THRESHOLD_PCT` suffices.
+    naming a hypothetical knob that only fits what the reference fit leaves on another day; a
+    measured change is not hypothetical, so a baseline above its floor (:data:`FLOOR_MARGIN`)
+    suffices. The same weaker test decides whether a claim still holds on the part of the data the
+    references cover (:func:`~battery_predictor.diagnosis.coverage.covered_claim`): there the claim
+    on the whole held-out part has already passed.
     """
     if not (math.isfinite(base_rmse_mv) and math.isfinite(best_rmse_mv)) or base_rmse_mv <= 0:
         return False
     gain_pct = 100.0 * (base_rmse_mv - best_rmse_mv) / base_rmse_mv
-    if gain_pct < GAIN_THRESHOLD_PCT:
+    if gain_pct < GAIN_THRESHOLD_PCT or base_rmse_mv - best_rmse_mv <= NOISE_FACTOR * noise_mv:
         return False
-    cut_beyond_noise = base_rmse_mv - best_rmse_mv > NOISE_FACTOR * noise_mv
-    if base_rmse_mv > BASELINE_FLOOR_FACTOR * floor_mv and cut_beyond_noise:
-        return True
-    if measured and base_rmse_mv > RESTORE_FACTOR * floor_mv and cut_beyond_noise:
-        return True
-    # a baseline that already predicts within its floor (the reference fit's own error) shows no effect to
-    # restore: a knob that predicts below the floor there fits the observed day better than the reference
-    # model fits its own healthy data
-    return (base_rmse_mv > RESTORE_FACTOR * floor_mv and best_rmse_mv <= RESTORE_FACTOR * floor_mv
-            and gain_pct >= RESTORE_MIN_GAIN_PCT)
+    return base_rmse_mv > (FLOOR_MARGIN if measured else BASELINE_FLOOR_FACTOR) * floor_mv

@@ -535,6 +535,15 @@ def _candidate_results(tasks: Sequence[tuple[int, Candidate]], fitted: dict[str,
     return results
 
 
+def _mark_unresolved(result: CandidateResult, obs: Sequence[Observed]) -> bool:
+    """Whether ``result``'s fitted effect is below what the instruments resolve (:meth:`Candidate.unresolved`);
+    the reason goes to ``result.unresolved``."""
+    cand = next((c for c in CANDIDATES if c.name == result.cause), None)
+    why = cand.unresolved(result.fitted, obs) if cand is not None else None
+    result.unresolved = why or ""
+    return why is not None
+
+
 def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[Observed],
             reference: ReferenceFit | None, base: CandidateResult, results: list[CandidateResult],
             run: dict[str, Any]) -> Diagnosis:
@@ -544,7 +553,8 @@ def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[
     ``fit_fraction``, ``split``).
     """
     analysis = analyse_residuals(engine, params, obs, base)
-    valid = [r for r in results if r.applicable and math.isfinite(r.heldout_rmse_mV)]
+    valid = [r for r in results if r.applicable and math.isfinite(r.heldout_rmse_mV)
+             and not _mark_unresolved(r, obs)]
     noise_mv = 1e3 * noise_level_v(obs)
     shift_k = None
     if refs and all(o.temperature_k is not None for o in obs) and all(r.temperature_k is not None for r in refs):
@@ -570,6 +580,9 @@ def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[
     evidence = evidence_text(cause, base, best, results, analysis, noise_mv, close, floor_mv, shift_k, refusal)
     if caveat:
         evidence += " " + caveat
+    for r in results:
+        if r.unresolved and r.gain_pct >= GAIN_THRESHOLD_PCT:
+            evidence += f" {r.cause} cut the held-out error by {r.gain_pct:.0f} % but is not named: {r.unresolved}."
     return Diagnosis(cause=cause, evidence=evidence, baseline=base, extended=extended, gain_pct=gain,
                      candidates=results, residuals=analysis, noise_mV=noise_mv, params=params, observed=obs,
                      reference=reference, separable_with=close, temperature_shift_k=shift_k, coverage=coverage,

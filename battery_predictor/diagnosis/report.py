@@ -168,6 +168,8 @@ def write_report(diag: Diagnosis, out_dir: str | Path, command: str = "") -> Pat
             lines.append(f"| {c.cause} | n/a | n/a | n/a | n/a | not applicable: {c.reason} |")
             continue
         fitted = ", ".join(f"{k} = {v:.4g}" for k, v in c.fitted.items()) or "-"
+        if c.unresolved:
+            fitted += f" (not named: {c.unresolved})"
         lines.append(f"| {c.cause if c is not diag.baseline else 'none (baseline)'} | {_fmt(c.heldout_rmse_mV)} | "
                      f"{_fmt(c.gain_pct)} | {_fmt(c.heldout_r2_mod, 4)} | {_fmt(c.runtime_error_s, 0)} | {fitted} |")
     lines += ["", "![held-out RMSE of every candidate](candidates.png)", ""]

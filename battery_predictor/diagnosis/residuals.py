@@ -42,8 +42,6 @@ if TYPE_CHECKING:
 from battery_predictor.diagnosis.decision import (
     BASELINE_FLOOR_FACTOR,
     GAIN_THRESHOLD_PCT,
-    RESTORE_FACTOR,
-    RESTORE_MIN_GAIN_PCT,
     measured_causes,
 )
 
@@ -219,10 +217,9 @@ def evidence_text(cause: str, base: CandidateResult, best: CandidateResult | Non
     if cause == "none":
         floor = noise_mv if floor_mv is None else floor_mv
         if base.heldout_rmse_mV <= BASELINE_FLOOR_FACTOR * floor:
-            parts.append(f"The baseline predicts the held-out data within {BASELINE_FLOOR_FACTOR:.0f}x its error floor "
-                         f"({floor:.1f} mV: noise, or its RMSE on the reference data), and no candidate brings it "
-                         f"back to {RESTORE_FACTOR:.2g}x that floor with a gain of {RESTORE_MIN_GAIN_PCT:.0f} % or "
-                         "more, so nothing is claimed"
+            parts.append(f"The baseline predicts the held-out data within {BASELINE_FLOOR_FACTOR:g}x its error floor "
+                         f"({floor:.1f} mV: noise, or its RMSE on the reference data), as well as a model without the "
+                         "change predicts another day, so nothing is claimed"
                          + (f" (best candidate {best.cause}: {best.heldout_rmse_mV:.1f} mV)." if best else "."))
         elif best is not None:
             parts.append(f"No candidate predicts the held-out data meaningfully better: best is {best.cause} "
@@ -245,7 +242,7 @@ def evidence_text(cause: str, base: CandidateResult, best: CandidateResult | Non
     floor = noise_mv if floor_mv is None else floor_mv
     if (temperature_shift_k is not None and cause in measured_causes(temperature_shift_k)
             and base.heldout_rmse_mV <= BASELINE_FLOOR_FACTOR * floor):
-        parts.append(f"The baseline is within {BASELINE_FLOOR_FACTOR:.0f}x its error floor ({floor:.1f} mV); the "
+        parts.append(f"The baseline is within {BASELINE_FLOOR_FACTOR:g}x its error floor ({floor:.1f} mV); the "
                      f"cause is named because the measured temperature differs from the reference's by "
                      f"{abs(temperature_shift_k):.0f} K and modelling it cuts the held-out error by more than the "
                      "noise.")

@@ -34,6 +34,9 @@ class CandidateResult:
     gain_pct: float = 0.0
     applicable: bool = True
     reason: str = ""
+    #: Why a fitted candidate is not named although it applies: its effect is below what the instruments
+    #: resolve (:meth:`~battery_predictor.diagnosis.candidates.Candidate.unresolved`); empty otherwise.
+    unresolved: str = ""
     sims: list[SimOut] = field(default_factory=list, repr=False)
     fitted_folds: list[dict[str, float]] = field(default_factory=list)
     #: Which solver ran the fit's simulations (:meth:`~battery_predictor.diagnosis.engine.Engine.usage_since`).
@@ -54,6 +57,8 @@ class CandidateResult:
             out["simulator"] = dict(self.simulator)
         if not self.applicable:
             out["not_applicable"] = self.reason
+        if self.unresolved:
+            out["unresolved"] = self.unresolved
         return out
 
 

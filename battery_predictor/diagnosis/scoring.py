@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TypedDict
 
@@ -140,6 +141,22 @@ def pooled(scores: list[HeldOut]) -> Pooled:
     return {"heldout_rmse_mV": 1e3 * rmse,
             "heldout_r2_mod": float(np.mean([s.r2_mod for s in scores])),
             "runtime_error_s": float(np.mean(runtimes)) if runtimes else None}
+
+
+def current_resolution_a(obs_list: Sequence[Observed]) -> float:
+    """The smallest step of the measured current between samples (A): the current reading's quantum.
+
+    A reading quantised to ``q`` is biased by up to ``q / 2`` wherever the current stays between two
+    levels, so a current offset within that is not resolved by the data. Continuous readings give a
+    negligible step; 0.0 when the current never changes.
+    """
+    steps = []
+    for obs in obs_list:
+        di = np.abs(np.diff(np.asarray(obs.i, dtype=float)))
+        nz = di[di > 1e-9]
+        if nz.size:
+            steps.append(float(np.min(nz)))
+    return min(steps) if steps else 0.0
 
 
 def noise_level_v(obs_list: list[Observed]) -> float:

@@ -34,17 +34,18 @@ def test_a_clear_cut_names_the_simplest_candidate_within_the_margin(rescore):
 
 
 def test_a_baseline_within_its_floor_names_nothing_and_a_measured_temperature_does(rescore):
-    assert rescore.decide(case(18.7, {"temperature": 8.1, "hysteresis": 15.0})) == "none"
-    assert rescore.decide(case(18.7, {"temperature": 8.1, "hysteresis": 15.0}, shift_k=-18.0)) == "temperature"
+    # 2.2x the floor: a hypothetical cause needs 2.5x; a measured one does not
+    assert rescore.decide(case(13.0, {"temperature": 8.1, "hysteresis": 12.0})) == "none"
+    assert rescore.decide(case(13.0, {"temperature": 8.1, "hysteresis": 12.0}, shift_k=-18.0)) == "temperature"
 
 
 def test_a_constant_set_for_the_rescoring_changes_the_decision(rescore, tmp_path, monkeypatch, capsys):
     path = tmp_path / "cases.jsonl"
-    path.write_text(json.dumps(case(19.5, {"resistance_growth": 7.1}, reference_mv=5.2)) + "\n")
-    monkeypatch.setattr(decision, "RESTORE_FACTOR", decision.RESTORE_FACTOR)  # restored after the test
+    path.write_text(json.dumps(case(12.5, {"resistance_growth": 7.1}, reference_mv=5.2)) + "\n")
+    monkeypatch.setattr(decision, "BASELINE_FLOOR_FACTOR", decision.BASELINE_FLOOR_FACTOR)  # restored after the test
     assert rescore.main(["score", str(path)]) == 0
     assert "right cause: 0 of 1" in capsys.readouterr().out
-    assert rescore.main(["score", str(path), "--set", "RESTORE_FACTOR=1.4"]) == 0
+    assert rescore.main(["score", str(path), "--set", "BASELINE_FLOOR_FACTOR=2.0"]) == 0
     assert "right cause: 1 of 1" in capsys.readouterr().out
 
 
@@ -53,3 +54,9 @@ def test_the_stored_cases_file_reads(rescore):
     cases = [json.loads(line) for line in stored.read_text().splitlines()]
     assert {c["label"] for c in cases} == {"tuning", "verdict"}
     assert all(rescore.decide(c) for c in cases)
+
+
+def test_a_candidate_below_the_instruments_resolution_is_not_named(rescore):
+    stored = case(22.0, {"current_offset": 7.5, "hysteresis": 19.0}, reference_mv=7.4, noise_mv=5.8, truth="none")
+    assert rescore.decide(stored) == "current_offset"
+    assert rescore.decide({**stored, "unresolved": ["current_offset"]}) == "none"

@@ -16,6 +16,7 @@ from battery_predictor.diagnosis.candidates import (
     SETTLING_TIME_CONSTANTS,
     CapacityFade,
     CellImbalance,
+    CurrentOffset,
     Hysteresis,
     ResistanceGrowth,
     candidate,
@@ -27,7 +28,7 @@ from battery_predictor.diagnosis.engine import Engine, Post, ends_at_cutoff, obs
 from battery_predictor.diagnosis.lsq import ParallelEvaluator, budgeted_least_squares
 from battery_predictor.diagnosis.residuals import correlation_ratio, direction_of_recent_current
 from battery_predictor.diagnosis.results import CandidateResult
-from battery_predictor.diagnosis.scoring import held_out_score, noise_level_v
+from battery_predictor.diagnosis.scoring import current_resolution_a, held_out_score, noise_level_v
 from battery_predictor.params import EXTENSION_NAMES, load_params
 from battery_predictor.recording import Recording
 from battery_predictor.simulation import SimulationRequest, StepLoad
@@ -255,28 +256,30 @@ def test_choose_best_compares_the_error_above_the_noise():
 @pytest.mark.parametrize(("base", "best", "noise", "floor", "allowed"), [
     (60.0, 8.0, 4.0, 4.0, True),     # far above the floor, cut to it
     (60.0, 50.0, 4.0, 4.0, False),   # 17 % gain: below the 20 % threshold
-    (12.1, 6.7, 7.9, 7.9, True),     # 1.5x the floor, the extension predicts down to the noise
-    (12.0, 8.4, 4.0, 4.0, False),    # 3x the floor cut by 30 % but not to the floor: the reference
+    (12.1, 6.7, 7.9, 7.9, False),    # 1.5x the floor, even cut to the noise: a correct model's error on
+                                     # another day is up to about twice its in-sample floor
+    (9.5, 6.5, 4.0, 4.0, False),     # 2.4x the floor cut by 32 % but not to the floor: the reference
                                      # model's own imperfection, which a knob fits partly
     (4.2, 4.0, 4.0, 4.0, False),     # at the floor already
-    (10.0, 6.0, 4.0, 6.0, True),     # restores the reference fit's RMSE (floor 6 mV) with 40 % gain
-    (20.0, 7.0, 8.0, 8.0, True),     # 2.5x the floor, restored
-    (30.0, 9.5, 8.0, 8.0, False),    # 3.75x, 9.5 > 1.1 x 8 mV: not restored, and not above 4x
+    (10.0, 6.0, 4.0, 6.0, False),    # back to the reference fit's RMSE (floor 6 mV) with 40 % gain, from 1.7x
+    (21.0, 7.0, 8.0, 8.0, True),     # 2.6x the floor, cut by 67 %
+    (30.0, 9.5, 8.0, 8.0, True),     # 3.75x the floor, cut by 68 %
+    (18.0, 7.0, 8.0, 8.0, False),    # 2.25x cut to the floor: not above 2.5x
     (25.5, 16.1, 3.0, 38.8, False),  # the baseline is below its floor already: nothing to restore
 ])
-def test_claim_needs_a_clear_baseline_error_or_a_restored_floor(base, best, noise, floor, allowed):
+def test_claim_needs_a_baseline_clearly_above_its_floor(base, best, noise, floor, allowed):
     assert claim_allowed(base, best, noise, floor) is allowed
 
 
 @pytest.mark.parametrize(("base", "best", "noise", "floor", "allowed"), [
-    (18.7, 8.1, 3.0, 6.0, True),    # 3.1x the floor, cut by 57 % and 3.5 noise levels
-    (18.7, 16.0, 3.0, 6.0, False),  # 14 % gain: below the 20 % threshold
+    (18.7, 9.5, 3.0, 8.0, True),    # 2.3x the floor, cut by 49 % and 3 noise levels
+    (18.7, 16.0, 3.0, 8.0, False),  # 14 % gain: below the 20 % threshold
     (6.4, 4.5, 3.0, 6.0, False),    # the baseline within 1.1x its floor: nothing to explain
     (9.0, 6.5, 3.0, 6.0, False),    # 28 % gain, but a cut of 2.5 mV, below the 3 mV noise
 ])
 def test_a_measured_change_needs_only_a_baseline_above_its_floor(base, best, noise, floor, allowed):
     assert claim_allowed(base, best, noise, floor, measured=True) is allowed
-    # the same figures for a hypothetical cause: the baseline is not 4x its floor, nor is the floor restored
+    # the same figures for a hypothetical cause: the baseline is not 2.5x its floor
     assert claim_allowed(base, best, noise, floor) is False
 
 
@@ -380,3 +383,43 @@ def test_hysteresis_decay_rate_is_free_when_a_fit_part_charges(temi):
 def test_hysteresis_not_applicable_when_the_fit_part_barely_discharges(temi):
     obs = _observed_steps(temi, [0.0, 0.05, 0.0], [1800.0, 60.0, 1800.0])
     assert Hysteresis().applicable(temi, [obs]) is not None
+
+
+def test_current_resolution_is_the_reading_quantum():
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 3600.0, 5.0)
+    i = np.round(2.0 + rng.normal(0, 0.3, t.size), 1)
+    rec = Recording(t, np.full(t.size, 15.0), i, None)
+    obs = observe(rec, load_params(PARAMS / "temi.yaml"))
+    assert current_resolution_a([obs]) == pytest.approx(0.1, rel=1e-6)
+    smooth = observe(Recording(t, np.full(t.size, 15.0), 2.0 + rng.normal(0, 0.3, t.size), None),
+                     load_params(PARAMS / "temi.yaml"))
+    assert current_resolution_a([smooth]) < 0.01
+
+
+@pytest.mark.parametrize("offset_a, named", [(0.021, False), (-0.049, False), (0.051, True), (0.3, True)])
+def test_a_current_offset_within_half_the_reading_quantum_is_never_named(offset_a, named):
+    rng = np.random.default_rng(4)
+    t = np.arange(0, 3600.0, 5.0)
+    rec = Recording(t, np.full(t.size, 15.0), np.round(2.0 + rng.normal(0, 0.3, t.size), 1), None)
+    obs = observe(rec, load_params(PARAMS / "temi.yaml"))
+    why = CurrentOffset().unresolved({"current_offset_a": offset_a}, [obs])
+    assert (why is None) == named
+    if not named:
+        assert "0.1 A" in why
+
+
+def test_an_unresolved_candidate_is_kept_in_the_table_but_not_named():
+    from battery_predictor.diagnosis.diagnose import _mark_unresolved
+
+    rng = np.random.default_rng(5)
+    t = np.arange(0, 3600.0, 5.0)
+    rec = Recording(t, np.full(t.size, 15.0), np.round(2.0 + rng.normal(0, 0.3, t.size), 1), None)
+    obs = observe(rec, load_params(PARAMS / "temi.yaml"))
+    res = CandidateResult(cause="current_offset", fitted={"current_offset_a": 0.02}, socs=[0.9],
+                          heldout_rmse_mV=7.5, heldout_r2_mod=0.99, runtime_error_s=None, fit_rmse_mV=6.0,
+                          evaluations=10, failures=0, seconds=1.0, gain_pct=43.0)
+    assert _mark_unresolved(res, [obs])
+    assert res.row()["unresolved"] == res.unresolved and "quantisation" in res.unresolved
+    other = replace(res, cause="resistance_growth", fitted={"contact_resistance_ohm": 1e-4})
+    assert not _mark_unresolved(other, [obs]) and "unresolved" not in other.row()
