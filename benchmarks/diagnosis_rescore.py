@@ -46,9 +46,15 @@ def case_record(path: Path, label: str) -> dict[str, Any] | None:
         "temperature_shift_k": d.get("temperature_shift_k"), "baseline_mv": d["baseline"]["heldout_rmse_mV"],
         "candidates": {c["cause"]: c["heldout_rmse_mV"] for c in d["candidates"]},
         "unresolved": sorted(c["cause"] for c in d["candidates"] if c.get("unresolved")),
-        "coverage": {k: cov.get(k) for k in ("leaves_range", "cause", "baseline_rmse_mV", "cause_rmse_mV")}
-        if cov else None,
+        "coverage": {**{k: cov.get(k) for k in ("cause", "baseline_rmse_mV", "cause_rmse_mV",
+                                                 "covered_heldout_samples")},
+                     "leaves_range": _leaves_range(cov)} if cov else None,
     }
+
+
+def _leaves_range(cov: dict[str, Any]) -> bool:
+    """Whether an observed recording went deeper than the references (``Coverage.leaves_range`` from its JSON)."""
+    return any(u is not None and math.isfinite(float(u)) for u in cov.get("covered_until_s") or ())
 
 
 def decide(case: dict[str, Any]) -> str:
@@ -64,6 +70,9 @@ def decide(case: dict[str, Any]) -> str:
     if best is None or cause == "none":
         return "none"
     cov = case["coverage"]
+    if cov and cov.get("leaves_range") and cov.get("covered_heldout_samples") == 0 \
+            and best.cause not in decision.measured_causes(shift):
+        return "none"  # no held-out sample within the references' depth: no claim can be checked there
     if cov and cov.get("baseline_rmse_mV") is not None and best.cause not in decision.measured_causes(shift):
         if cov.get("cause") != best.cause:
             return best.cause + " (coverage?)"
