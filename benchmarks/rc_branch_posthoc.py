@@ -287,19 +287,22 @@ def refit(a: argparse.Namespace) -> None:
         start: dict[str, Any] = json.loads(Path(a.from_json).read_text())["coordinates"]
         space = [replace(c, initial=min(max(float(start.get(c.name, c.initial)), c.low), c.high)) for c in space]
     n_states = sum(c.recording is not None for c in space)
-    branch = [] if a.no_branch else [Coordinate(R_NAME, a.r0, a.r_range[0], a.r_range[1], True),
+    branch = [] if a.no_branch or a.plain else [Coordinate(R_NAME, a.r0, a.r_range[0], a.r_range[1], True),
                                      Coordinate(TAU_NAME, a.tau0, a.tau_range[0], a.tau_range[1], True)]
     space = space[:len(space) - n_states] + branch + space[len(space) - n_states:]
     low, cut = lowered(params)
-    prob = RCProblem(params=low, recordings=recs, simulator=simulator_named("engine"), space=space, cutoff_pack_v=cut,
-                     arrhenius=a.arrhenius)
+    prob: IdentificationProblem = RCProblem(params=low, recordings=recs, simulator=simulator_named("engine"),
+                                            space=space, cutoff_pack_v=cut, arrhenius=a.arrhenius)
+    if a.plain:  # fit's own problem: no branch, the params' cut-off
+        prob = IdentificationProblem(params=params, recordings=recs, simulator=simulator_named("engine"), space=space)
     tic = time.perf_counter()
     coarse: dict[str, Any] = {} if a.coarse_window is None else {"coarse_window_s": a.coarse_window or None}
     result = identify(prob, evaluations=a.evaluations, seed=a.seed, **coarse)
     wall = time.perf_counter() - tic
     score = prob.score(result.coordinates)
     co = result.coordinates
-    print(f"refit with the branch ({result.evaluations} evaluations, {wall:.0f} s):", _scores(prob, score.results))
+    what = "with the branch" if branch else "without a branch"
+    print(f"refit {what} ({result.evaluations} evaluations, {wall:.0f} s):", _scores(prob, score.results))
     print("coordinates:", json.dumps({k: round(v, 6) for k, v in co.items()}))
     if a.save_json:
         Path(a.save_json).write_text(json.dumps({"coordinates": co, "r2_mod": score.r2_mod}))
@@ -328,7 +331,9 @@ def main() -> None:
     ap.add_argument("--evaluations", type=int, default=1000)
     ap.add_argument("--coarse-window", type=float, default=None,
                     help="refit: identify's coarse window in s (0: none; default: identify's own)")
-    ap.add_argument("--no-branch", action="store_true", help="refit: without the branch (fit's own search)")
+    ap.add_argument("--no-branch", action="store_true", help="refit: without the branch (still past the cut-off)")
+    ap.add_argument("--plain", action="store_true",
+                    help="refit: fit's own problem (no branch, simulations end at the params' cut-off)")
     ap.add_argument("--save-json", help="refit: write the coordinates here (a --fit-json for posthoc)")
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
