@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from battery_predictor.diagnosis.candidates import CANDIDATES, Baseline, Candidate
+from battery_predictor.diagnosis.candidates import CANDIDATES, Baseline, Candidate, candidate
 from battery_predictor.diagnosis.coverage import covered_claim, measured_text, reference_coverage, refusal_text
 from battery_predictor.diagnosis.decision import (
     GAIN_THRESHOLD_PCT,
@@ -538,8 +538,7 @@ def _candidate_results(tasks: Sequence[tuple[int, Candidate]], fitted: dict[str,
 def _mark_unresolved(result: CandidateResult, obs: Sequence[Observed]) -> bool:
     """Whether ``result``'s fitted effect is below what the instruments resolve (:meth:`Candidate.unresolved`);
     the reason goes to ``result.unresolved``."""
-    cand = next((c for c in CANDIDATES if c.name == result.cause), None)
-    why = cand.unresolved(result.fitted, obs) if cand is not None else None
+    why = candidate(result.cause).unresolved(result.fitted, obs)
     result.unresolved = why or ""
     return why is not None
 

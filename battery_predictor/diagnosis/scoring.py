@@ -150,13 +150,15 @@ def current_resolution_a(obs_list: Sequence[Observed]) -> float:
     levels, so a current offset within that is not resolved by the data. Continuous readings give a
     negligible step; 0.0 when the current never changes.
     """
-    steps = []
-    for obs in obs_list:
-        di = np.abs(np.diff(np.asarray(obs.i, dtype=float)))
-        nz = di[di > 1e-9]
-        if nz.size:
-            steps.append(float(np.min(nz)))
+    steps = [s for obs in obs_list if (s := _smallest_step(obs.i)) is not None]
     return min(steps) if steps else 0.0
+
+
+def _smallest_step(values: np.ndarray) -> float | None:
+    """The smallest non-zero change between consecutive samples of ``values`` (None when they never change)."""
+    d = np.abs(np.diff(np.asarray(values, dtype=float)))
+    nz = d[d > 1e-9]
+    return float(np.min(nz)) if nz.size else None
 
 
 def noise_level_v(obs_list: list[Observed]) -> float:
@@ -174,10 +176,9 @@ def noise_level_v(obs_list: list[Observed]) -> float:
         d2 = (v[2:] - 2.0 * v[1:-1] + v[:-2])[same]
         if d2.size > 10:
             d2s.append(d2)
-        dv = np.abs(np.diff(v))
-        nz = dv[dv > 0]
-        if nz.size:
-            steps.append(float(np.min(nz)))
+        step = _smallest_step(v)
+        if step is not None:
+            steps.append(step)
     sigma = 0.0
     if d2s:
         d = np.concatenate(d2s)
