@@ -16,9 +16,10 @@ selection sees) and on the data as given. The library is instrumented by wrappin
     ``identify`` as it is.
 ``by-cost``
     the end point chosen by the lowest cost instead of the highest R2_mod.
-``last-current``
-    the padding past a recording's end (``request_for_recording``'s ``extend_s``) runs at the mean current
-    of the recording's last 60 s instead of its whole mean during the search; the result is scored with
+``whole-mean``
+    the padding past a recording's end (``request_for_recording``'s ``extend_s``) runs at the whole
+    recording's mean current (the package before 2026-11-27's sixteenth session) instead of
+    :func:`~battery_predictor.fitting.problem.end_current_a` during the search; the result is scored with
     the padding as it is (the R2_mod ``fit`` reports).
 
 Usage (from the repository root)::
@@ -50,16 +51,11 @@ from battery_predictor.errors import SimulationError  # noqa: E402
 from battery_predictor.fitting import identification as ident  # noqa: E402
 from battery_predictor.fitting import problem as fproblem  # noqa: E402
 from battery_predictor.fitting.identification import IdentificationProblem  # noqa: E402
-from battery_predictor.simulation.extensions import current_offset_a  # noqa: E402
 from battery_predictor.simulation.load import StepLoad  # noqa: E402
 
 LOG: list[tuple] = []
 ORIG_TPE, ORIG_REFINE, ORIG_SELECT = ident._run_tpe, ident._refine, ident.select_by_r2_mod
 ORIG_REQUEST = fproblem.request_for_recording
-#: ``--variant last-current``: the padding's current is the recording's mean over its last this many s.
-LAST_S = 60.0
-
-
 def _r2(problem: IdentificationProblem, unit: np.ndarray) -> float:
     try:
         return problem.score(problem.coordinates(unit)).r2_mod
@@ -76,16 +72,13 @@ def _gaps(problem: IdentificationProblem, unit: np.ndarray) -> str:
     return "/".join(f"{r.end_time_s - rec.duration_s:+.0f}" for r, rec in zip(results, problem.recordings, strict=True))
 
 
-def request_last_current(params, rec, *, initial_state="auto", extend_s=0.0):  # noqa: ANN001, ANN201
-    """``request_for_recording`` with the padding run at the mean current of the recording's last
-    :data:`LAST_S` s (not the whole recording's mean): a recording that ends at its cut-off in a load step
-    is continued at that step's current, so a model that survives the step by a hair ends soon after."""
+def request_whole_mean(params, rec, *, initial_state="auto", extend_s=0.0):  # noqa: ANN001, ANN201
+    """``request_for_recording`` with the padding run at the whole recording's mean current."""
     req = ORIG_REQUEST(params, rec, initial_state=initial_state, extend_s=0.0)
     if extend_s <= 0:
         return req
+    load = req.load.append(StepLoad.constant(max(req.load.mean_current_a(), 0.0), extend_s))
     t = rec.relative_time_s
-    last = np.asarray(rec.current_a, dtype=float)[t >= t[-1] - LAST_S] - current_offset_a(params)
-    load = req.load.append(StepLoad.constant(max(float(np.mean(last)), 0.0), extend_s))
     dt = float(np.median(np.diff(t)))
     out_t = np.concatenate([t, np.arange(t[-1] + dt, load.end_s, dt)])
     return replace(req, load=load, output_time_s=out_t)
@@ -127,7 +120,7 @@ def main() -> None:
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--coarse-window", type=float, default=ident.COARSE_WINDOW_S, help="0: one stage")
     ap.add_argument("--evaluations", type=int, default=1000)
-    ap.add_argument("--variant", choices=["default", "by-cost", "last-current"], default="default")
+    ap.add_argument("--variant", choices=["default", "by-cost", "whole-mean"], default="default")
     ap.add_argument("--top", type=int, default=5, help="TPE candidates shown")
     a = ap.parse_args()
     params, recs = _fit_data(a.start, a.data)
@@ -141,8 +134,8 @@ def main() -> None:
     for seed in a.seeds:
         LOG.clear()
         tic = time.perf_counter()
-        if a.variant == "last-current":
-            fproblem.request_for_recording = request_last_current
+        if a.variant == "whole-mean":
+            fproblem.request_for_recording = request_whole_mean
         res = ident.identify(problem, evaluations=a.evaluations, seed=seed, **coarse)
         cost, unit = res.cost, res.unit
         wall = time.perf_counter() - tic

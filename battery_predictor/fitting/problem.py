@@ -17,6 +17,8 @@ from battery_predictor.simulation.base import PackSimResult, PackSimulator, Simu
 from battery_predictor.simulation.extensions import current_offset_a
 from battery_predictor.simulation.load import StepLoad
 
+#: The padding past a recording's end continues the mean current of its last this many seconds (s).
+END_LOAD_WINDOW_S = 60.0
 #: Below this |current| / nominal capacity (1/h) a recording is taken to start at rest.
 _REST_C_RATE = 0.02
 
@@ -47,13 +49,13 @@ def request_for_recording(params: PackParams, rec: Recording, *, initial_state: 
         ``"auto"``: ``"params"`` when initial concentrations are fitted or the recording does not
         start at rest, else ``"voltage"``.
     extend_s : float
-        Continue past the recording for this many seconds at the recording's mean current, so
-        that a model which would end later than the measurement shows it (R2_mod's late case).
+        Continue past the recording for this many seconds at :func:`end_current_a`, so that a model
+        which would end later than the measurement shows it (R2_mod's late case).
     """
     # extension current_offset: the cells carry the measured current minus the sensor's offset
     load = StepLoad.from_samples(rec.time_s, rec.current_a - current_offset_a(params))
     if extend_s > 0:
-        load = load.append(StepLoad.constant(max(load.mean_current_a(), 0.0), extend_s))
+        load = load.append(StepLoad.constant(end_current_a(load), extend_s))
     if initial_state == "auto":
         at_rest = starts_at_rest(params, rec)
         fits_initial = any(p.startswith("Initial concentration") for p in params.fit.parameters)
@@ -65,6 +67,18 @@ def request_for_recording(params: PackParams, rec: Recording, *, initial_state: 
         out_t = np.concatenate([out_t, np.arange(out_t[-1] + dt, load.end_s, dt)])
     return SimulationRequest(load=load, ambient_temperature_k=recording_temperature_k(params, rec),
                              initial_pack_ocv_v=ocv, output_time_s=out_t)
+
+
+def end_current_a(load: StepLoad) -> float:
+    """Current (A) a padding past a recording's end continues with.
+
+    A recording that ends at its cut-off ends under the load that took the cell there: the padding
+    continues the mean of the last :data:`END_LOAD_WINDOW_S` seconds, so a model that survives that
+    load by a little ends a little later, and its padded error grows with how late it is. Never
+    below the whole recording's mean (a tail of rest or regeneration would otherwise let a late
+    model idle through the whole padding) nor below 0.
+    """
+    return max(load.mean_current_a(END_LOAD_WINDOW_S), load.mean_current_a(), 0.0)
 
 
 def starts_at_rest(params: PackParams, rec: Recording) -> bool:

@@ -103,9 +103,16 @@ class StepLoad:
         """Charge drawn over the whole load in Ah."""
         return float(np.sum(np.diff(self.edges_s()) * self.current_a) / 3600.0)
 
-    def mean_current_a(self) -> float:
-        """Time-averaged current in A."""
-        return self.charge_ah() * 3600.0 / self.duration_s
+    def mean_current_a(self, last_s: float | None = None) -> float:
+        """Time-averaged current in A, over the whole load or over its last ``last_s`` seconds."""
+        if last_s is None or last_s >= self.duration_s:
+            return self.charge_ah() * 3600.0 / self.duration_s
+        if last_s <= 0:
+            raise ProfileError(f"load: averaging window must be > 0 s, got {last_s}")
+        edges = self.edges_s()
+        start_s = self.end_s - last_s
+        held_s = np.clip(edges[1:], start_s, None) - np.clip(edges[:-1], start_s, None)
+        return float(np.sum(held_s * self.current_a) / last_s)
 
     def resample(self, period_s: float) -> StepLoad:
         """Charge-conserving resampling onto a uniform grid of ``period_s`` seconds.

@@ -196,9 +196,15 @@ def test_identifiability_flags_compensating_parameters_and_keeps_independent_one
 
 
 def _synthetic_recording(params, coordinates, seed: int, sample_s: float = 20.0) -> Recording:
-    """A 1 h pulsed discharge of ``params`` at ``coordinates`` with 2 mV noise, ``sample_s`` samples."""
+    """A 1 h pulsed discharge of ``params`` at ``coordinates`` with 2 mV noise, ``sample_s`` samples.
+
+    The load's steps last whole multiples of 20 s, so every edge falls on a sample (of 20 s or of a
+    divisor of it): a current read at the sampling instant would otherwise misplace the edges between
+    two samples, and a model other than the truth could explain such a recording better than the
+    truth itself (the padding past a cut-off, not the data, then decided between them).
+    """
     rng = np.random.default_rng(seed)
-    durations = rng.uniform(60.0, 240.0, 30)
+    durations = 20.0 * np.round(rng.uniform(60.0, 240.0, 30) / 20.0)
     currents = rng.uniform(0.5, 6.0, 30)
     load = StepLoad.from_durations(durations, currents)
     values = pybamm_values(params, coordinates)[0]
@@ -262,6 +268,28 @@ def test_two_stage_identification_keeps_its_budget_and_reports_the_cost_on_the_d
     assert [h[0] for h in one_stage.history][0] == "tpe"
 
 
+def test_the_cost_grows_smoothly_as_the_model_outlasts_a_recording_that_ends_at_its_cut_off_in_a_step(panasonic):
+    # mostly rest, then the cut-off reached in a 5 A step: a model with a little more capacity survives
+    # the step by a little and must end a little later, not idle through the padding at the rest's mean
+    truth = _far_truth(panasonic)
+    load = StepLoad.from_durations([2800.0, 20000.0, 3000.0], [2.0, 0.0, 5.0])
+    sim = get_simulator("fast").simulate(panasonic.with_values(pybamm_values(panasonic, truth)[0]),
+                                         SimulationRequest(load=load, output_time_s=np.arange(0.0, load.end_s, 10.0)))
+    rng = np.random.default_rng(0)
+    rec = Recording(sim.time_s, sim.pack_voltage_v + rng.normal(0.0, 0.002, sim.time_s.size),
+                    load.current_at(sim.time_s), source="step-end")
+    assert ends_at_cutoff(rec) and rec.current_a[-1] == 5.0
+    problem = _problem(panasonic, rec)
+
+    def cost(scale: float) -> float:
+        r = problem.residuals({**truth, "positive_capacity_ah": scale * truth["positive_capacity_ah"]})
+        return float(r @ r)
+
+    below, at, above = cost(0.97), cost(1.0), [cost(s) for s in (1.01, 1.02, 1.04)]
+    assert at < min(below, *above)
+    assert np.all(np.diff(above) > 0) and max(above) < 10.0 * below
+
+
 def test_refinement_near_the_truth_converges_to_it_and_reports_the_positive_electrode_determined(panasonic):
     truth = _far_truth(panasonic)
     rec = _synthetic_recording(panasonic, truth, seed=3)
@@ -272,7 +300,7 @@ def test_refinement_near_the_truth_converges_to_it_and_reports_the_positive_elec
     assert result.cost <= 1.05 * float(at_truth @ at_truth)  # the noise floor of the true parameters
     for name in ("positive_capacity_ah", "series_resistance_ohm"):
         assert result.coordinates[name] == pytest.approx(truth[name], rel=0.05), name
-    # the data sample the current every 20 s, so even the true parameters miss the load's edges
+    # no worse than the true parameters, which score the 2 mV noise
     assert problem.score(result.coordinates).rmse_mv[0] <= 1.05 * problem.score(truth).rmse_mv[0]
     rep = identifiability_of(problem, result.unit)
     determined = dict(zip(rep.names, rep.determined, strict=True))
