@@ -103,6 +103,10 @@ class Candidate:
         else why it is not: such a candidate is scored and reported but never named."""
         return None
 
+    def sensor_offset_a(self, fitted: dict[str, float]) -> float:
+        """The current sensor's offset (A, pack) this cause says the reading carries; 0 for causes in the cells."""
+        return 0.0
+
     def structure(self, params: PackParams) -> PackParams:
         """The params whose model is built (with the extension's options active)."""
         return params
@@ -357,6 +361,9 @@ class CurrentOffset(Candidate):
             return (f"the fitted offset ({offset_a:.3f} A) is within half the current reading's {quantum_a:.3g} A "
                     "step, the bias quantisation alone gives a reading")
         return None
+
+    def sensor_offset_a(self, fitted: dict[str, float]) -> float:
+        return float(fitted.get("current_offset_a", 0.0))
 
     def extended_params(self, params: PackParams, theta: dict[str, float], socs: list[float],
                         engine: Engine) -> PackParams:

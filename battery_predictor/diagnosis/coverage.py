@@ -9,7 +9,12 @@ the battery, and a candidate with a capacity knob (capacity fade above all) move
 fits it. That error is not evidence of a change.
 
 The depth is the net charge drawn since the start of the recording (Ah, measured): the observed
-recording is *covered* until it first has drawn more than any reference drew. Not the model's
+recording is *covered* until it first has drawn more than any reference drew. The charge is the
+one the named cause implies: a current sensor offset (cause ``current_offset``) is taken off the
+observed reading before its depth is measured, as the extension drives the cells; read as it is,
+the biased reading would put a day with a positive offset deeper than the pack can go (a 0.8 A
+offset over 6 h reads 18.7 Ah from a 14.7 Ah pack) and refuse the very cause that explains it.
+Not the model's
 state of charge: the baseline's fitted initial SOC absorbs the effect itself (a faded or a cold
 cell looks like one that started less charged), so a day with a real loss of capacity would look
 deeper than it is (measured: the Ranger seed-2 capacity-fade and temperature cases of the second
@@ -60,6 +65,9 @@ class Coverage:
     covered_until_s : list of float
         Per observed recording, the time (s from its start) at which it first has drawn more than
         ``reference_drawn_ah`` (``inf``: never).
+    sensor_offset_a : float
+        The current sensor offset (A) taken off the observed readings (the named cause's; 0 for
+        causes in the cells).
     heldout_samples, covered_heldout_samples : int
         Held-out samples of all observed recordings, and those before ``covered_until_s``.
     cause : str or None
@@ -77,6 +85,7 @@ class Coverage:
     reference_drawn_ah: float | None
     observed_drawn_ah: list[float]
     covered_until_s: list[float]
+    sensor_offset_a: float = 0.0
     heldout_samples: int = 0
     covered_heldout_samples: int = 0
     cause: str | None = None
@@ -93,20 +102,23 @@ class Coverage:
     def to_json(self) -> dict[str, Any]:
         return {"reference_drawn_ah": self.reference_drawn_ah, "observed_drawn_ah": list(self.observed_drawn_ah),
                 "covered_until_s": [u if math.isfinite(u) else None for u in self.covered_until_s],
+                "sensor_offset_a": self.sensor_offset_a,
                 "heldout_samples": self.heldout_samples, "covered_heldout_samples": self.covered_heldout_samples,
                 "cause": self.cause, "baseline_rmse_mV": self.baseline_rmse_mV, "cause_rmse_mV": self.cause_rmse_mV,
                 "refused": self.refused, "kept_as_measured": self.measured}
 
 
-def first_time_beyond(obs: Observed, drawn_ah: float | None) -> float:
-    """Time (s) of the first sample at which ``obs`` has drawn more than ``drawn_ah`` (``inf``: none, or None)."""
+def first_time_beyond(obs: Observed, drawn_ah: float | None, sensor_offset_a: float = 0.0) -> float:
+    """Time (s) of the first sample at which ``obs`` has drawn more than ``drawn_ah`` (``inf``: none, or None),
+    its reading less ``sensor_offset_a`` (A)."""
     if drawn_ah is None:
         return math.inf
-    deeper = np.nonzero(obs.cumulative_charge_ah() > drawn_ah)[0]
+    deeper = np.nonzero(obs.cumulative_charge_ah(sensor_offset_a) > drawn_ah)[0]
     return float(obs.t[deeper[0]]) if deeper.size else math.inf
 
 
-def reference_coverage(refs: Sequence[Observed], reference: ReferenceFit, observed: Sequence[Observed]) -> Coverage:
+def reference_coverage(refs: Sequence[Observed], reference: ReferenceFit, observed: Sequence[Observed],
+                       sensor_offset_a: float = 0.0) -> Coverage:
     """How deep the observed recordings go against the references (see the module docstring).
 
     Parameters
@@ -117,18 +129,22 @@ def reference_coverage(refs: Sequence[Observed], reference: ReferenceFit, observ
         The reference fit (whether it kept the end padding of references that stopped at their cut-off).
     observed : sequence of Observed
         The observed recordings.
+    sensor_offset_a : float
+        A current sensor offset (A, pack) the named cause says the observed readings carry; taken off
+        them (the references are read as they are: the cause is a change since them).
     """
     ref_drawn: float | None
     if reference.end_padding and any(r.ends_at_cutoff for r in refs):
         ref_drawn = None  # a reference that stopped at its cut-off: the model was shown the end
     else:
         ref_drawn = max(float(np.max(r.cumulative_charge_ah())) for r in refs)
-    until = [first_time_beyond(o, ref_drawn) for o in observed]
+    until = [first_time_beyond(o, ref_drawn, sensor_offset_a) for o in observed]
     held = sum(int(o.held_mask.sum()) for o in observed)
     covered = sum(int((o.held_mask & (o.t < u)).sum()) for o, u in zip(observed, until))
     return Coverage(reference_drawn_ah=ref_drawn,
-                    observed_drawn_ah=[float(np.max(o.cumulative_charge_ah())) for o in observed],
-                    covered_until_s=until, heldout_samples=held, covered_heldout_samples=covered)
+                    observed_drawn_ah=[float(np.max(o.cumulative_charge_ah(sensor_offset_a))) for o in observed],
+                    covered_until_s=until, sensor_offset_a=sensor_offset_a, heldout_samples=held,
+                    covered_heldout_samples=covered)
 
 
 def covered_rmse_mv(observed: Sequence[Observed], sims: Sequence[SimOut], until_s: Sequence[float]) -> float:

@@ -563,7 +563,10 @@ def _decide(engine: Engine, params: PackParams, obs: list[Observed], refs: list[
     best, cause = name_cause(valid, base.heldout_rmse_mV, noise_mv, floor_mv, shift_k)
     extended, gain = (best, best.gain_pct) if cause != "none" and best is not None else (base, 0.0)
     # the claim must hold where the references were (mod:`coverage`): not only beyond their depth
-    coverage = reference_coverage(refs, reference, obs) if reference is not None and refs else None
+    coverage = None
+    if reference is not None and refs:
+        offset_a = candidate(cause).sensor_offset_a(best.fitted) if best is not None and cause != "none" else 0.0
+        coverage = reference_coverage(refs, reference, obs, offset_a)
     refusal = caveat = None
     if cause != "none" and best is not None and coverage is not None and not covered_claim(
             coverage, cause, obs, base.sims, best.sims, noise_mv, floor_mv):

@@ -131,9 +131,13 @@ class Observed:
         dt = float(np.median(np.diff(self.t)))
         return np.arange(self.t[-1] + dt, self.load.end_s - 2 * _EDGE_S, dt)
 
-    def cumulative_charge_ah(self) -> np.ndarray:
-        """Charge drawn since the start at each sample (Ah, signed, discharge positive)."""
-        return self.load.cumulative_charge_as(self.t) / 3600.0
+    def cumulative_charge_ah(self, sensor_offset_a: float = 0.0) -> np.ndarray:
+        """Charge drawn since the start at each sample (Ah, signed, discharge positive).
+
+        ``sensor_offset_a`` (A): a current sensor offset taken off the reading, as the extension
+        ``current_offset`` drives the cells with the measured current minus the offset.
+        """
+        return (self.load.cumulative_charge_as(self.t) - sensor_offset_a * self.t) / 3600.0
 
 
 def model_cutoff_v(cutoff_cell_v: float, obs: Observed, series: int) -> float:

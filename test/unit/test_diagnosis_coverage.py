@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from battery_predictor.diagnosis.candidates import CANDIDATES
 from battery_predictor.diagnosis.coverage import reference_coverage
 from battery_predictor.diagnosis.diagnose import _decide
 from battery_predictor.diagnosis.engine import Engine, SimOut, observe, soc_from_voltage
@@ -61,7 +62,7 @@ def _sim(t: np.ndarray, v: np.ndarray) -> SimOut:
 
 
 def _diagnose(setup, error_from_depth: float, end_padding: bool = False, cause: str = "capacity_fade",
-              observed_k: float | None = None):
+              observed_k: float | None = None, fitted: dict[str, float] | None = None):
     """Reference day draws 45 % of the capacity, observed day 65 %; the baseline's error grows from ``error_from_depth``.
 
     The candidate ``cause`` predicts the observed day exactly (within the noise). ``observed_k``: the
@@ -79,6 +80,7 @@ def _diagnose(setup, error_from_depth: float, end_padding: bool = False, cause: 
     base_v = v_true + params.series * 0.25 * over ** 2
     base = _result("none", obs, _sim(obs.t, base_v), soc0)
     best = _result(cause, obs, _sim(obs.t, v_true.copy()), soc0, base.heldout_rmse_mV)
+    best.fitted = dict(fitted or {})
     reference = ReferenceFit(values={}, socs=[START_OCV_V], rmse_mV=4.0, initial_rmse_mV=50.0, evaluations=0,
                              skipped=[], seconds=0.0, end_padding=end_padding)
     run = dict(seconds=0.0, budget=2, fit_fraction=0.6, split="time")
@@ -132,3 +134,34 @@ def test_a_measured_temperature_change_is_named_with_a_caveat(setup):
     # without a measured shift the same candidate is refused like any hidden cause
     same_k = _diagnose(setup, error_from_depth=0.5, cause="temperature", observed_k=298.15)
     assert same_k.cause == "none" and same_k.coverage is not None and same_k.coverage.refused
+
+
+def test_a_current_offset_is_taken_off_the_reading_before_the_depth_is_measured(setup):
+    # the observed day reads 0.65 of the capacity but 0.25 of it is the sensor's offset: the cells drew 0.40
+    params, engine, soc0, capacity = setup
+    ref = observe(_day(params, capacity, 0.45, 1)[0], params, fit_fraction=0.95)
+    obs = observe(_day(params, capacity, 0.65, 2)[0], params, fit_fraction=0.6)
+    reference = ReferenceFit(values={}, socs=[START_OCV_V], rmse_mV=4.0, initial_rmse_mV=50.0, evaluations=0,
+                             skipped=[], seconds=0.0)
+    offset_a = 0.25 * capacity / HOURS
+    read = reference_coverage([ref], reference, [obs])
+    drawn = reference_coverage([ref], reference, [obs], offset_a)
+    assert read.leaves_range and not drawn.leaves_range
+    assert drawn.observed_drawn_ah[0] == pytest.approx(0.40 * capacity, rel=1e-3)
+    assert drawn.to_json()["sensor_offset_a"] == pytest.approx(offset_a)
+
+
+def test_a_named_current_offset_is_judged_at_the_depth_it_implies(setup):
+    # the same error beyond the references' depth, but the cause says the reading is 0.25 C-h too high
+    params, engine, soc0, capacity = setup
+    offset_a = 0.25 * capacity / HOURS
+    diag = _diagnose(setup, error_from_depth=0.5, cause="current_offset", fitted={"current_offset_a": offset_a})
+    assert diag.cause == "current_offset" and not diag.coverage.leaves_range
+    assert _diagnose(setup, error_from_depth=0.5, cause="current_offset").cause == "none"
+
+
+def test_only_the_current_offset_cause_says_the_reading_is_biased():
+    fitted = {"current_offset_a": 0.3, "weak_group_capacity_fraction": 0.9}
+    offsets = {c.name: c.sensor_offset_a(fitted) for c in CANDIDATES}
+    assert offsets.pop("current_offset") == 0.3
+    assert set(offsets.values()) == {0.0}
