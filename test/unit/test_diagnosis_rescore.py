@@ -52,11 +52,14 @@ def test_a_constant_set_for_the_rescoring_changes_the_decision(rescore, tmp_path
 def test_the_stored_cases_file_reads(rescore):
     stored = SCRIPT.parents[1] / "docs" / "diagnosis_issue12" / "decision_cases.jsonl"
     cases = [json.loads(line) for line in stored.read_text().splitlines()]
-    assert {c["label"] for c in cases} == {"tuning", "verdict", "verdict2", "tuning_offset"}
+    assert {c["label"] for c in cases} == {"tuning", "verdict", "verdict2", "tuning_offset", "verdict3"}
     assert all(rescore.decide(c) for c in cases)
     # the verdict seeds 20-23 ran on the present rule: the rescoring gives each recorded answer back
     latest = [c for c in cases if c["label"] == "verdict2"]
     assert len(latest) == 60 and all(rescore.decide(c) == c["named"] for c in latest)
+    # verdict seed 24 ran on the offset-corrected coverage and the fit's new end padding
+    seed24 = [c for c in cases if c["label"] == "verdict3"]
+    assert len(seed24) == 15 and all(rescore.decide(c) == c["named"] for c in seed24)
     # the offset-corrected coverage's design check (tuning seeds 100-105, current offset and none)
     offset = [c for c in cases if c["label"] == "tuning_offset"]
     assert len(offset) == 24 and all(rescore.decide(c) == c["named"] == c["truth"] for c in offset)
