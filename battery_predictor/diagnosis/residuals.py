@@ -201,7 +201,9 @@ def evidence_text(cause: str, base: CandidateResult, best: CandidateResult | Non
     ``refusal``: with cause ``none``, why a claim the held-out part would make was not made (the
     observed data go deeper than the references, :func:`~battery_predictor.diagnosis.coverage.refusal_text`).
     """
-    parts = [f"Baseline held-out RMSE {base.heldout_rmse_mV:.1f} mV (voltage noise {noise_mv:.1f} mV)."]
+    noise = (f"voltage noise {noise_mv:.1f} mV" if noise_mv >= 0.05 else
+             "voltage noise not measurable here: no three samples at one current and no quantisation step")
+    parts = [f"Baseline held-out RMSE {base.heldout_rmse_mV:.1f} mV ({noise})."]
     ranked = [(f, e) for f, e in analysis.ranked() if e >= 0.05][:3]
     if ranked:
         desc = ", ".join(f"{_LABELS[f]} (eta2={e:.2f}, r={analysis.pearson_r.get(f, 0):+.2f})" for f, e in ranked)

@@ -97,6 +97,10 @@ def test_capacity_like_cause_on_colder_data_carries_a_caveat():
     temp.gain_pct, temp.heldout_rmse_mV = 45.0, 80.0
     physical = evidence_text("temperature", base, temp, [offset, temp], analysis, 1.0, [], 25.0, -15.0)
     assert "Caveat" not in physical
+    assert "(voltage noise 1.0 mV)" in physical
+    # window averages of a varying current: nothing to measure the noise on, which the text says
+    unmeasured = evidence_text("temperature", base, temp, [offset, temp], analysis, 0.0, [], 25.0, -15.0)
+    assert "voltage noise not measurable here" in unmeasured and "noise 0.0 mV" not in unmeasured
 
 
 def test_auto_split_folds_few_recordings_and_falls_back_to_time_when_folds_get_expensive():
