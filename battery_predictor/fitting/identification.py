@@ -348,6 +348,12 @@ class IdentificationProblem:
         return np.concatenate([g.residuals(r) for g, r in zip(self._grids, results, strict=True)]
                               + [g.residuals(results[k]) for k, g in self._group_grids])
 
+    def failed(self, residuals: np.ndarray) -> bool:
+        """Whether ``residuals`` (of :meth:`residuals`) are those of a simulation that failed."""
+        failure = np.concatenate([g.residuals(None) for g in self._grids]
+                                 + [g.residuals(None) for _, g in self._group_grids])
+        return bool(np.array_equal(residuals, failure))
+
     def score(self, coordinates: dict[str, float]) -> CandidateScore:
         """R2_mod and RMSE of ``coordinates`` (raises :class:`SimulationError` on failure)."""
         results, values = self.simulate(coordinates)
@@ -559,7 +565,9 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
     the data averaged over those windows (:func:`coarsened`) with ``1 - fine_fraction`` of the
     budget, and its result is refined on the data as given with the rest; otherwise on the data
     as given only. The refinement starts from the coarse result or the start point, whichever fits the
-    data as given better. The returned cost is the data-as-given cost.
+    data as given better; when neither simulates on the data as given (a load peak the windows
+    averaged away drives the model out of its range), the rest of the budget searches the data as
+    given in one stage instead. The returned cost is the data-as-given cost.
 
     Parameters
     ----------
@@ -606,8 +614,12 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
     # (a start already at the optimum of the data as given stays there when the coarse optimum differs)
     start = problem.unit({c.name: c.initial for c in problem.space})
     begin = min((first.unit, start), key=lambda u: _sum_of_squares(residual(u)))
-    cost, best = _refine(residual, begin, max_evaluations=n_fine)
     history = [(label + phase, count, c) for phase, count, c in first.history]
+    if problem.failed(residual(begin)):
+        return _searched_as_given(problem, first, history, n_fine - log.count, log, seed=seed,
+                                  tpe_fraction=tpe_fraction, starts=starts,
+                                  startup_per_coordinate=startup_per_coordinate, progress=progress, tic=tic)
+    cost, best = _refine(residual, begin, max_evaluations=n_fine)
     history.append(("refine on the data as given", first.evaluations + log.count, cost))
     if progress is not None:
         progress(*history[-1])
@@ -615,6 +627,26 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
                                 evaluations=first.evaluations + log.count, tpe_evaluations=first.tpe_evaluations,
                                 starts=first.starts + 1, seconds=first.seconds + time.perf_counter() - tic,
                                 history=history, model_seconds=first.model_seconds + log.model_seconds)
+
+
+def _searched_as_given(problem: IdentificationProblem, first: IdentificationResult,
+                       history: list[tuple[str, int, float]], evaluations: int, log: EvaluationLog, *,
+                       seed: int, tpe_fraction: float, starts: int, startup_per_coordinate: int,
+                       progress: Callable[[str, int, float], None] | None, tic: float) -> IdentificationResult:
+    """The second stage of :func:`identify` when neither the coarse result nor the start simulates on the
+    data as given: a one-stage search there with the ``evaluations`` left (the coarse stage's result and
+    the evaluations spent on it are kept in the counts)."""
+    second = _identify_one_stage(problem, evaluations=max(evaluations, 2), seed=seed, tpe_fraction=tpe_fraction,
+                                 starts=starts, startup_per_coordinate=startup_per_coordinate, progress=None)
+    history.extend(("the coarse result fails on the data as given; searched there: " + phase,
+                    first.evaluations + log.count + count, c) for phase, count, c in second.history)
+    if progress is not None:
+        progress(*history[-1])
+    return replace(second, evaluations=first.evaluations + log.count + second.evaluations,
+                   tpe_evaluations=first.tpe_evaluations + second.tpe_evaluations,
+                   starts=first.starts + second.starts, history=history,
+                   seconds=first.seconds + time.perf_counter() - tic,
+                   model_seconds=first.model_seconds + log.model_seconds + second.model_seconds)
 
 
 def _sum_of_squares(r: np.ndarray) -> float:

@@ -466,6 +466,55 @@ def test_a_day_that_stops_above_its_cutoff_leaves_only_the_noise_at_the_truth(pa
     assert math.sqrt(float(r @ r) / r.size) / weight <= 3.0 * noise
 
 
+def test_when_neither_the_coarse_result_nor_the_start_simulates_on_the_data_as_given_the_rest_searches_there(
+        monkeypatch):
+    """A load peak the coarse windows averaged away can put the coarse optimum (and the start) where the
+    model fails on the data as given; the second stage then searches the data as given, within the budget."""
+    target = np.array([0.3, 0.7])
+    failure = np.full(2, 10.0)
+
+    @dataclasses.dataclass
+    class Coordinate:
+        name: str
+        initial: float = 0.5
+
+    class Quadratic:
+        space = [Coordinate("a"), Coordinate("b")]
+        runs = 0
+
+        def __init__(self, minimum, fails_from=math.inf):
+            self.minimum, self.fails_from = np.asarray(minimum), fails_from
+
+        def unit(self, coordinates):
+            return np.array([coordinates["a"], coordinates["b"]])
+
+        def coordinates(self, unit):
+            return {"a": float(unit[0]), "b": float(unit[1])}
+
+        def residuals(self, coordinates):
+            Quadratic.runs += 1
+            u = self.unit(coordinates)
+            return failure.copy() if u[0] >= self.fails_from else u - self.minimum
+
+        def failed(self, r):
+            return bool(np.array_equal(r, failure))
+
+        def score(self, coordinates):
+            Quadratic.runs += 1
+            r = self.residuals(coordinates)
+            Quadratic.runs -= 1
+            return dataclasses.replace(SCORE, r2_mod=1.0 - float(r @ r))
+
+    fine = Quadratic(target, fails_from=0.45)
+    monkeypatch.setattr("battery_predictor.fitting.identification.coarsened",
+                        lambda problem, window_s: Quadratic([0.8, 0.5]))
+    Quadratic.runs = 0
+    result = identify(fine, evaluations=200, seed=0, starts=1)
+    assert Quadratic.runs == result.evaluations <= 200
+    np.testing.assert_allclose(result.unit, target, atol=1e-3)
+    assert any("fails on the data as given" in phase for phase, _, _ in result.history)
+
+
 def test_extra_refinements_keep_the_budget_including_the_scoring_of_every_end_point():
     """A quick-converging problem leaves budget after the planned refinements; further distinct
     candidates are refined, and each end point's scoring still counts within the budget."""
