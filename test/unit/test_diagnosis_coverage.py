@@ -87,12 +87,19 @@ def _diagnose(setup, error_from_depth: float, end_padding: bool = False, cause: 
     return _decide(engine, params, [obs], [ref], reference, base, [best], run)
 
 
-def test_coverage_is_the_charge_the_references_drew(setup):
+def _reference_and_observed_days(setup):
+    """A reference day drawing 45 % of the capacity, an observed one reading 65 %, and the reference fit."""
     params, engine, soc0, capacity = setup
     ref = observe(_day(params, capacity, 0.45, 1)[0], params, fit_fraction=0.95)
     obs = observe(_day(params, capacity, 0.65, 2)[0], params, fit_fraction=0.6)
     reference = ReferenceFit(values={}, socs=[START_OCV_V], rmse_mV=4.0, initial_rmse_mV=50.0, evaluations=0,
                              skipped=[], seconds=0.0)
+    return ref, obs, reference
+
+
+def test_coverage_is_the_charge_the_references_drew(setup):
+    params, engine, soc0, capacity = setup
+    ref, obs, reference = _reference_and_observed_days(setup)
     cov = reference_coverage([ref], reference, [obs])
     assert cov.reference_drawn_ah == pytest.approx(0.45 * capacity, rel=1e-3)
     assert cov.covered_until_s[0] == pytest.approx(0.45 / 0.65 * HOURS * 3600.0, abs=2 * DT_S)
@@ -138,11 +145,8 @@ def test_a_measured_temperature_change_is_named_with_a_caveat(setup):
 
 def test_a_current_offset_is_taken_off_the_reading_before_the_depth_is_measured(setup):
     # the observed day reads 0.65 of the capacity but 0.25 of it is the sensor's offset: the cells drew 0.40
-    params, engine, soc0, capacity = setup
-    ref = observe(_day(params, capacity, 0.45, 1)[0], params, fit_fraction=0.95)
-    obs = observe(_day(params, capacity, 0.65, 2)[0], params, fit_fraction=0.6)
-    reference = ReferenceFit(values={}, socs=[START_OCV_V], rmse_mV=4.0, initial_rmse_mV=50.0, evaluations=0,
-                             skipped=[], seconds=0.0)
+    capacity = setup[3]
+    ref, obs, reference = _reference_and_observed_days(setup)
     offset_a = 0.25 * capacity / HOURS
     read = reference_coverage([ref], reference, [obs])
     drawn = reference_coverage([ref], reference, [obs], offset_a)

@@ -466,51 +466,59 @@ def test_a_day_that_stops_above_its_cutoff_leaves_only_the_noise_at_the_truth(pa
     assert math.sqrt(float(r @ r) / r.size) / weight <= 3.0 * noise
 
 
+@dataclasses.dataclass
+class _UnitCoordinate:
+    name: str
+    initial: float = 0.5
+
+
+class _Quadratic:
+    """Two coordinates on the unit cube, residual ``unit - minimum``; counts its runs in ``runs``.
+
+    From ``fails_from`` on in the first coordinate the residual is :data:`FAILURE`, as a failed simulation's is.
+    """
+
+    space = [_UnitCoordinate("a"), _UnitCoordinate("b")]
+    runs = 0
+    FAILURE = np.full(2, 10.0)
+
+    def __init__(self, minimum, fails_from: float = math.inf):
+        self.minimum, self.fails_from = np.asarray(minimum, dtype=float), fails_from
+
+    def unit(self, coordinates):
+        return np.array([coordinates["a"], coordinates["b"]])
+
+    def coordinates(self, unit):
+        return {"a": float(unit[0]), "b": float(unit[1])}
+
+    def _residual(self, coordinates):
+        u = self.unit(coordinates)
+        return self.FAILURE.copy() if u[0] >= self.fails_from else u - self.minimum
+
+    def residuals(self, coordinates):
+        _Quadratic.runs += 1
+        return self._residual(coordinates)
+
+    def failed(self, r):
+        return bool(np.array_equal(r, self.FAILURE))
+
+    def score(self, coordinates):
+        _Quadratic.runs += 1
+        r = self._residual(coordinates)
+        return dataclasses.replace(SCORE, r2_mod=1.0 - float(r @ r))
+
+
 def test_when_neither_the_coarse_result_nor_the_start_simulates_on_the_data_as_given_the_rest_searches_there(
         monkeypatch):
     """A load peak the coarse windows averaged away can put the coarse optimum (and the start) where the
     model fails on the data as given; the second stage then searches the data as given, within the budget."""
     target = np.array([0.3, 0.7])
-    failure = np.full(2, 10.0)
-
-    @dataclasses.dataclass
-    class Coordinate:
-        name: str
-        initial: float = 0.5
-
-    class Quadratic:
-        space = [Coordinate("a"), Coordinate("b")]
-        runs = 0
-
-        def __init__(self, minimum, fails_from=math.inf):
-            self.minimum, self.fails_from = np.asarray(minimum), fails_from
-
-        def unit(self, coordinates):
-            return np.array([coordinates["a"], coordinates["b"]])
-
-        def coordinates(self, unit):
-            return {"a": float(unit[0]), "b": float(unit[1])}
-
-        def residuals(self, coordinates):
-            Quadratic.runs += 1
-            u = self.unit(coordinates)
-            return failure.copy() if u[0] >= self.fails_from else u - self.minimum
-
-        def failed(self, r):
-            return bool(np.array_equal(r, failure))
-
-        def score(self, coordinates):
-            Quadratic.runs += 1
-            r = self.residuals(coordinates)
-            Quadratic.runs -= 1
-            return dataclasses.replace(SCORE, r2_mod=1.0 - float(r @ r))
-
-    fine = Quadratic(target, fails_from=0.45)
+    fine = _Quadratic(target, fails_from=0.45)  # the start (0.5) fails, and so does the coarse optimum
     monkeypatch.setattr("battery_predictor.fitting.identification.coarsened",
-                        lambda problem, window_s: Quadratic([0.8, 0.5]))
-    Quadratic.runs = 0
+                        lambda problem, window_s: _Quadratic([0.8, 0.5]))
+    _Quadratic.runs = 0
     result = identify(fine, evaluations=200, seed=0, starts=1)
-    assert Quadratic.runs == result.evaluations <= 200
+    assert _Quadratic.runs == result.evaluations <= 200
     np.testing.assert_allclose(result.unit, target, atol=1e-3)
     assert any("fails on the data as given" in phase for phase, _, _ in result.history)
 
@@ -519,37 +527,12 @@ def test_extra_refinements_keep_the_budget_including_the_scoring_of_every_end_po
     """A quick-converging problem leaves budget after the planned refinements; further distinct
     candidates are refined, and each end point's scoring still counts within the budget."""
     target = np.array([0.3, 0.7])
-
-    @dataclasses.dataclass
-    class Coordinate:
-        name: str
-        initial: float = 0.5
-
-    class Quadratic:
-        space = [Coordinate("a"), Coordinate("b")]
-        runs = 0
-
-        def unit(self, coordinates):
-            return np.array([coordinates["a"], coordinates["b"]])
-
-        def coordinates(self, unit):
-            return {"a": float(unit[0]), "b": float(unit[1])}
-
-        def residuals(self, coordinates):
-            Quadratic.runs += 1
-            return self.unit(coordinates) - target
-
-        def score(self, coordinates):
-            Quadratic.runs += 1
-            r = self.unit(coordinates) - target
-            return dataclasses.replace(SCORE, r2_mod=1.0 - float(r @ r))
-
-    problem = Quadratic()
+    problem = _Quadratic(target)
     extra = 0
     for budget in range(20, 80, 3):
-        Quadratic.runs = 0
+        _Quadratic.runs = 0
         result = identify(problem, evaluations=budget, seed=0, starts=1, coarse_window_s=None)
         extra += result.starts > 1
-        assert Quadratic.runs == result.evaluations <= budget
+        assert _Quadratic.runs == result.evaluations <= budget
         np.testing.assert_allclose(result.unit, target, atol=1e-4)
     assert extra, "the quick problem must leave budget for further refinements"
