@@ -122,10 +122,11 @@ def main() -> None:
     ap.add_argument("--evaluations", type=int, default=1000)
     ap.add_argument("--variant", choices=["default", "by-cost", "whole-mean"], default="default")
     ap.add_argument("--top", type=int, default=5, help="TPE candidates shown")
+    ap.add_argument("--coordinates", nargs="*", default=[], help="optional coordinates, as fit's --coordinates")
     a = ap.parse_args()
     params, recs = _fit_data(a.start, a.data)
     problem = IdentificationProblem(params=params, recordings=recs, simulator=simulator_named("engine"),
-                                    space=_space(params, recs, ()))
+                                    space=_space(params, recs, tuple(a.coordinates)))
     print("coordinates:", " ".join(problem.names))
     ident._run_tpe, ident._refine = tpe, refine
     ident.select_by_r2_mod = select_by_cost if a.variant == "by-cost" else select

@@ -390,6 +390,8 @@ class IdentificationResult:
     model_seconds : float
         Of ``seconds``, the time inside model evaluations (simulation and residual) in s; the rest,
         :attr:`optimiser_seconds`, is the optimiser's own (TPE's sampler, the trust-region steps).
+    ends : list of tuple
+        ``(cost, unit)`` of every end point the search chose from (TPE's best and each refinement's end).
     """
 
     coordinates: dict[str, float]
@@ -401,6 +403,7 @@ class IdentificationResult:
     seconds: float
     history: list[tuple[str, int, float]]
     model_seconds: float = 0.0
+    ends: list[tuple[float, np.ndarray]] = field(default_factory=list, repr=False)
 
     @property
     def optimiser_seconds(self) -> float:
@@ -565,9 +568,10 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
     the data averaged over those windows (:func:`coarsened`) with ``1 - fine_fraction`` of the
     budget, and its result is refined on the data as given with the rest; otherwise on the data
     as given only. The refinement starts from the coarse result or the start point, whichever fits the
-    data as given better; when neither simulates on the data as given (a load peak the windows
-    averaged away drives the model out of its range), the rest of the budget searches the data as
-    given in one stage instead. The returned cost is the data-as-given cost.
+    data as given better. When neither simulates on the data as given (a load peak the windows
+    averaged away drives the model out of its range), it starts from the best of the coarse stage's
+    other end points that does; when none does, the rest of the budget searches the data as given in
+    one stage. The returned cost is the data-as-given cost.
 
     Parameters
     ----------
@@ -616,6 +620,9 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
     begin = min((first.unit, start), key=lambda u: _sum_of_squares(residual(u)))
     history = [(label + phase, count, c) for phase, count, c in first.history]
     if problem.failed(residual(begin)):
+        running = _running_end(problem, residual, first.ends)
+        begin = begin if running is None else running
+    if problem.failed(residual(begin)) and n_fine - log.count >= 2:
         return _searched_as_given(problem, first, history, n_fine - log.count, log, seed=seed,
                                   tpe_fraction=tpe_fraction, starts=starts,
                                   startup_per_coordinate=startup_per_coordinate, progress=progress, tic=tic)
@@ -627,6 +634,16 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
                                 evaluations=first.evaluations + log.count, tpe_evaluations=first.tpe_evaluations,
                                 starts=first.starts + 1, seconds=first.seconds + time.perf_counter() - tic,
                                 history=history, model_seconds=first.model_seconds + log.model_seconds)
+
+
+def _running_end(problem: IdentificationProblem, residual: Callable[[np.ndarray], np.ndarray],
+                 ends: Sequence[tuple[float, np.ndarray]]) -> np.ndarray | None:
+    """Of a coarse stage's ``ends``, the one that fits the data as given best among those that simulate there."""
+    try:
+        running = [u for _, u in ends if not problem.failed(residual(u))]
+    except BudgetExhausted:
+        return None
+    return min(running, key=lambda u: _sum_of_squares(residual(u))) if running else None
 
 
 def _searched_as_given(problem: IdentificationProblem, first: IdentificationResult,
@@ -700,7 +717,8 @@ def _identify_one_stage(problem: IdentificationProblem, *, evaluations: int, see
     model_s = log.model_seconds + time.perf_counter() - scoring_tic
     return IdentificationResult(coordinates=problem.coordinates(best), unit=best, cost=cost,
                                 evaluations=log.count + len(ends), tpe_evaluations=tpe_count, starts=len(ends) - 1,
-                                seconds=time.perf_counter() - tic, history=history, model_seconds=model_s)
+                                seconds=time.perf_counter() - tic, history=history, model_seconds=model_s,
+                                ends=ends)
 
 
 #: Labels of the structures :func:`identify_structures` fits.

@@ -523,6 +523,18 @@ def test_when_neither_the_coarse_result_nor_the_start_simulates_on_the_data_as_g
     assert any("fails on the data as given" in phase for phase, _, _ in result.history)
 
 
+def test_a_failing_coarse_result_hands_over_to_the_best_coarse_end_that_simulates_on_the_data_as_given():
+    from battery_predictor.fitting.identification import EvaluationLog, _cost_function, _running_end
+
+    fine = _Quadratic([0.3, 0.7], fails_from=0.45)
+    residual = _cost_function(fine, EvaluationLog(budget=10))
+    ends = [(0.01, np.array([0.8, 0.5])), (0.02, np.array([0.1, 0.1])), (0.03, np.array([0.35, 0.6]))]
+    np.testing.assert_array_equal(_running_end(fine, residual, ends), [0.35, 0.6])
+    assert _running_end(fine, residual, ends[:1]) is None
+    # a budget too small to look: no hand-over
+    assert _running_end(fine, _cost_function(fine, EvaluationLog(budget=1)), ends) is None
+
+
 def test_extra_refinements_keep_the_budget_including_the_scoring_of_every_end_point():
     """A quick-converging problem leaves budget after the planned refinements; further distinct
     candidates are refined, and each end point's scoring still counts within the budget."""
