@@ -109,10 +109,8 @@ class StepLoad:
             return self.charge_ah() * 3600.0 / self.duration_s
         if last_s <= 0:
             raise ProfileError(f"load: averaging window must be > 0 s, got {last_s}")
-        edges = self.edges_s()
-        start_s = self.end_s - last_s
-        held_s = np.clip(edges[1:], start_s, None) - np.clip(edges[:-1], start_s, None)
-        return float(np.sum(held_s * self.current_a) / last_s)
+        before, total = self.cumulative_charge_as([self.end_s - last_s, self.end_s])
+        return float(total - before) / last_s
 
     def resample(self, period_s: float) -> StepLoad:
         """Charge-conserving resampling onto a uniform grid of ``period_s`` seconds.
