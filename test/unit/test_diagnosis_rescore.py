@@ -52,7 +52,8 @@ def test_a_constant_set_for_the_rescoring_changes_the_decision(rescore, tmp_path
 def test_the_stored_cases_file_reads(rescore):
     stored = SCRIPT.parents[1] / "docs" / "diagnosis_issue12" / "decision_cases.jsonl"
     cases = [json.loads(line) for line in stored.read_text().splitlines()]
-    assert {c["label"] for c in cases} == {"tuning", "verdict", "verdict2", "tuning_offset", "verdict3"}
+    assert {c["label"] for c in cases} == {"tuning", "verdict", "verdict2", "tuning_offset", "verdict3",
+                                             "verdict4"}
     assert all(rescore.decide(c) for c in cases)
     # the verdict seeds 20-23 ran on the present rule: the rescoring gives each recorded answer back
     latest = [c for c in cases if c["label"] == "verdict2"]
@@ -60,6 +61,11 @@ def test_the_stored_cases_file_reads(rescore):
     # verdict seed 24 ran on the offset-corrected coverage and the fit's new end padding
     seed24 = [c for c in cases if c["label"] == "verdict3"]
     assert len(seed24) == 15 and all(rescore.decide(c) == c["named"] for c in seed24)
+    # verdict seed 25 ran on the same code: 14 of 15 right, no claim on none
+    seed25 = [c for c in cases if c["label"] == "verdict4"]
+    assert len(seed25) == 15 and all(rescore.decide(c) == c["named"] for c in seed25)
+    assert sum(c["named"] == c["truth"] for c in seed25) == 14
+    assert not any(c["named"] != "none" and c["truth"] == "none" for c in seed25)
     # the offset-corrected coverage's design check (tuning seeds 100-105, current offset and none)
     offset = [c for c in cases if c["label"] == "tuning_offset"]
     assert len(offset) == 24 and all(rescore.decide(c) == c["named"] == c["truth"] for c in offset)
