@@ -45,3 +45,28 @@ def test_lgm50_10degC_discharges_name_temperature(process_workers_args):
     # cell_imbalance does not apply to a single cell
     imbalance = next(c for c in result["candidates"] if c["cause"] == "cell_imbalance")
     assert "not_applicable" in imbalance
+
+
+PANASONIC = Path(__file__).resolve().parents[3] / "shared" / "data" / "panasonic_18650pf"
+COLD = Path(__file__).resolve().parents[1] / "data" / "panasonic_18650pf_cold"
+PANASONIC_OCV = Path(__file__).resolve().parents[2] / "docs" / "runtime_real_data" / "panasonic_ocv.yaml"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not PANASONIC.is_dir(), reason="measured data not available (../shared/data)")
+def test_panasonic_minus10degC_drive_cycles_fitted_at_25degC_name_temperature(process_workers_args):
+    # the issue's own real case (named current_offset once): -10 degC HWFET + US06 against 25 degC HWFET + LA92,
+    # each observed recording starting with a 2 h soak; params with the measured OCV (no cold prior in them)
+    refs = [str(PANASONIC / f"drive_T25C_{c}.csv") for c in ("HWFET", "LA92")]
+    obs = [str(COLD / f"drive_Tm10C_{c}.csv") for c in ("HWFET", "US06")]
+    cmd = [CLI, "diagnose", "--params", str(PANASONIC_OCV), "--reference", *refs, "--data", *obs,
+           "--resample", "10", "--json", "--quiet", *process_workers_args]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(proc.stdout)
+    assert result["judged"] and result["reference_fit"]["r2_mod"] > 0.99, result["reference_fit"]
+    assert result["temperature_shift_k"] < -20.0
+    # measured once (docs/findings.md, "Colder cells nobody tuned on"): baseline 161.7 mV, temperature +57 %
+    assert result["baseline"]["heldout_rmse_mV"] > 100.0
+    assert result["cause"] == "temperature", result["evidence"]
+    assert result["gain_pct"] >= 30.0, result["evidence"]
