@@ -1,9 +1,11 @@
-"""The diagnosis on measured data (../shared/data): the LG M50 cell at 10 degC.
+"""The diagnosis on measured data: the LG M50 cell at 10 degC, the Panasonic 18650PF at -10 degC.
 
 Reference: the four 25 degC constant-current discharges (identified on the SPM engine); observed: the
 0.5C, 1C and 2C discharges at 10 degC (each trimmed to its discharge), judged with the
 cross-recording split (each fold fits on the two other discharges whole and the first 60 % of the
-discharge throughput of the third, and predicts the rest of it). Findings in docs/findings.md.
+discharge throughput of the third, and predicts the rest of it). The Panasonic: 25 degC HWFET + LA92
+(../shared/data) against the -10 degC HWFET + US06 in test/data (each after a 2 h soak). Findings in
+docs/findings.md.
 """
 
 from __future__ import annotations
