@@ -85,7 +85,7 @@ from battery_predictor.fitting.space import unit_to_value
 from battery_predictor.params import PackParams, cached_parameter_values
 from battery_predictor.processes import ProcessPool, shared
 from battery_predictor.recording import Recording
-from battery_predictor.simulation.extensions import ANCHOR_TEMPERATURE
+from battery_predictor.simulation.extensions import ANCHOR_TEMPERATURE, with_cold_window_anchors
 
 #: Default evaluation budget of every observed-data fit (baseline and each candidate; Jacobian columns
 #: count). Why 80, and the other constants here: docs/findings.md, "Code notes (issue 15)".
@@ -444,6 +444,8 @@ def diagnose(params: PackParams, observed: Sequence[Recording], references: Sequ
         params, reference = identify_reference(params, references, reference_budget, seed, progress,
                                                noise_mv=1e3 * noise_level_v(refs))
         params = with_reference_anchor(params, refs)
+    # a cold window narrows towards the diagnosed cell's charged end for every candidate (one engine extraction)
+    params = with_cold_window_anchors(params)
     obs = [observe(r, params, fit_fraction=fit_fraction, name=str(r.source)) for r in observed]
     if reference is not None:
         refusal = reference_verdict(reference, 1e3 * noise_level_v(refs))
