@@ -45,6 +45,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--load-model", choices=("auto", "power", "current"), default=None,
                    help="what of the average load stays constant ahead (default: the predictor's, auto; see the "
                         "node parameter load_model)")
+    p.add_argument("--load-estimator", choices=("cycle", "ewma"), default=None,
+                   help="the average load ahead: the present cycle's mean (cycle) or an exponentially weighted mean "
+                        "(ewma) (default: the predictor's, cycle; see the node parameter load_estimator)")
+    p.add_argument("--load-time-constant-s", type=float, default=None, metavar="S",
+                   help="time constant of --load-estimator ewma, s (default: the predictor's, 1800; node parameter "
+                        "load_time_constant_s)")
     p.add_argument("--drift-correction", choices=("full", "smallest"), default=None,
                    help="where a carried state that left the state tolerance goes (default: the predictor's, full; "
                         "see the node parameter drift_correction)")
@@ -115,7 +121,11 @@ def run(args: argparse.Namespace) -> int:
         if not known:
             raise InputDataError("--capacity-from: none of these recordings ends at the cut-off")
         capacities["measured"] = sum(known) / len(known)
+    if args.load_time_constant_s is not None and not (math.isfinite(args.load_time_constant_s)
+                                                      and args.load_time_constant_s > 0):
+        raise InputDataError(f"--load-time-constant-s {args.load_time_constant_s}: must be a positive number of seconds")
     options = {"peak_source": args.peak_source, "load_model": args.load_model,
+               "load_estimator": args.load_estimator, "load_time_constant_s": args.load_time_constant_s,
                "drift_correction": args.drift_correction, "thermal_forecast": args.thermal_forecast,
                "ambient_temperature_k": args.ambient_k}
     config = PredictorConfig(params_file=str(params.source), cutoff_voltage_v=cutoff_v,
@@ -134,7 +144,8 @@ def run(args: argparse.Namespace) -> int:
         written = calibrated.to_yaml(args.calibrate_uncertainty)
         summary["calibrated_uncertainty"] = {**calibrated.provenance["uncertainty"], "params_out": str(written)}
     summary.update({"params": str(params.source), "cutoff_v": cutoff_v, "peak_source": config.peak_source,
-                    "load_model": config.load_model, "drift_correction": config.drift_correction,
+                    "load_model": config.load_model, "load_estimator": config.load_estimator,
+                    "load_time_constant_s": config.load_time_constant_s, "drift_correction": config.drift_correction,
                     "thermal_forecast": config.thermal_forecast, "ambient_temperature_k": config.ambient_temperature_k,
                     "capacities_ah": capacities,
                     "checkpoints": list(checkpoints), "seconds": time.perf_counter() - tic})
@@ -215,7 +226,7 @@ def report_markdown(summary: dict) -> str:
     lines = ["# Remaining runtime on measured recordings", "",
              f"Made by `battery-predictor {' '.join(shlex.quote(a) for a in sys.argv[1:])}`", "",
              f"Params `{Path(summary['params']).name}`, cut-off {summary['cutoff_v']:.2f} V, peaks from "
-             f"{summary['peak_source']}s, constant {summary['load_model']} ahead, drift correction {summary['drift_correction']}, temperature ahead {summary['thermal_forecast']}, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
+             f"{summary['peak_source']}s, constant {summary['load_model']} ahead (load estimator {summary['load_estimator']}), drift correction {summary['drift_correction']}, temperature ahead {summary['thermal_forecast']}, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
              "discharge. Counter capacities: " + ", ".join(f"{k} {v:.3f} Ah" for k, v in summary["capacities_ah"].items())
              + ". MAE / bias in min; worst late % = the largest error relative to the true remaining time after "
              f"{summary['late_after_fraction']:.0%} of the discharge.", "", head,

@@ -108,6 +108,27 @@ def test_cli_scores_the_predictor_and_the_counters_on_a_discharge(model_discharg
     assert [r["fraction"] for r in rows] == [0.2, 0.5, 0.8]
 
 
+def test_cli_runs_the_core_with_the_load_estimator_asked_for(model_discharge_csv):
+    proc = subprocess.run([str(CLI), "evaluate-runtime", "--params", str(PARAMS), "--data", str(model_discharge_csv),
+                           "--checkpoints", "0.5", "--load-model", "current", "--load-estimator", "ewma",
+                           "--load-time-constant-s", "600", "--json"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["load_estimator"] == "ewma" and summary["load_time_constant_s"] == 600.0
+    # a constant current: the weighted mean is the cycle mean, so the answer stays close to the truth
+    pooled = summary["pooled"]["predictor"]
+    assert pooled["answered"] == 1 and pooled["mae_min"] < 0.05 * summary["per_recording"][0]["discharge_min"]
+
+
+@pytest.mark.parametrize("value", ["0", "-5", "nan"])
+def test_cli_refuses_a_load_time_constant_that_is_not_positive_in_one_line(model_discharge_csv, value):
+    proc = subprocess.run([str(CLI), "evaluate-runtime", "--params", str(PARAMS), "--data", str(model_discharge_csv),
+                           "--load-estimator", "ewma", f"--load-time-constant-s={value}"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and "--load-time-constant-s" in proc.stderr
+
+
 def test_cli_refuses_bad_checkpoints_in_one_line(model_discharge_csv):
     proc = subprocess.run([str(CLI), "evaluate-runtime", "--params", str(PARAMS), "--data", str(model_discharge_csv),
                            "--checkpoints", "0.5:2"], capture_output=True, text=True, timeout=120)
