@@ -98,6 +98,9 @@ def run(args: argparse.Namespace) -> int:
     from battery_predictor.prediction.core import PredictorConfig, PredictorCore
 
     checkpoints = parse_checkpoints(args.checkpoints)
+    if args.load_time_constant_s is not None and not (math.isfinite(args.load_time_constant_s)
+                                                      and args.load_time_constant_s > 0):
+        raise InputDataError(f"--load-time-constant-s {args.load_time_constant_s}: must be a positive number of seconds")
     out_dir = check_output_dir(args.out, "--out") if args.out else None
     tic = time.perf_counter()
     params = load_params(args.params)
@@ -121,9 +124,6 @@ def run(args: argparse.Namespace) -> int:
         if not known:
             raise InputDataError("--capacity-from: none of these recordings ends at the cut-off")
         capacities["measured"] = sum(known) / len(known)
-    if args.load_time_constant_s is not None and not (math.isfinite(args.load_time_constant_s)
-                                                      and args.load_time_constant_s > 0):
-        raise InputDataError(f"--load-time-constant-s {args.load_time_constant_s}: must be a positive number of seconds")
     options = {"peak_source": args.peak_source, "load_model": args.load_model,
                "load_estimator": args.load_estimator, "load_time_constant_s": args.load_time_constant_s,
                "drift_correction": args.drift_correction, "thermal_forecast": args.thermal_forecast,
