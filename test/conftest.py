@@ -8,10 +8,12 @@ through a file under the run's temporary directory (:func:`_once_per_run`).
 from __future__ import annotations
 
 import fcntl
+import importlib.util
 import os
 import pickle
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -110,3 +112,18 @@ def longest_route_segments():
 
     profile = route_profile(longest_route(80.0), mode="mean")
     return list(zip(profile.duration_s, profile.current_a)) + [(60.0, 1.70)]
+
+
+def load_script(path: Path) -> ModuleType:
+    """A script of the repository that is not part of the package (``benchmarks/``, ``docs/``), imported as a module."""
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    assert spec is not None and spec.loader is not None, path
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="session")
+def repo_script() -> Callable[[str], ModuleType]:
+    """``repo_script("benchmarks/diagnosis_rescore.py")``: :func:`load_script` of a path relative to the repository."""
+    return lambda relative: load_script(REPO / relative)

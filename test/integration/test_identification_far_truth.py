@@ -7,7 +7,6 @@ one day (on the SPM engine) and predicts another. More draws: ``BP_FAR_TRUTH_SEE
 
 from __future__ import annotations
 
-import importlib.util
 import os
 from pathlib import Path
 
@@ -19,18 +18,11 @@ REPO = Path(__file__).resolve().parents[2]
 SEEDS = [int(s) for s in os.environ.get("BP_FAR_TRUTH_SEEDS", "0").split()]
 
 
-def _generator():
-    spec = importlib.util.spec_from_file_location("far_truth", REPO / "benchmarks" / "identification_far_truth.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("pack", ["temi", "ranger"])
-def test_a_far_truth_is_fitted_to_the_noise_and_its_held_out_runtime_within_one_percent(pack, seed):
-    gen = _generator()
+def test_a_far_truth_is_fitted_to_the_noise_and_its_held_out_runtime_within_one_percent(pack, seed, repo_script):
+    gen = repo_script("benchmarks/identification_far_truth.py")
     params = load_params(REPO / "params" / gen.PACKS[pack][0])
     out = gen.run_seed(params, seed, evaluations=1000, resample_s=None, simulator="engine", pack=pack)  # as `fit` prepares the 5 s day
     # 5 mV noise + 10 mV quantisation (2.9 mV rms) on the fitted day, twice that as the floor

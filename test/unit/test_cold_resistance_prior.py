@@ -8,7 +8,6 @@ model applies it in the cold and not at 25 degC.
 
 from __future__ import annotations
 
-import importlib.util
 from dataclasses import replace
 from pathlib import Path
 
@@ -40,10 +39,8 @@ def test_the_shipped_prior_is_a_physical_share_of_the_cells_step(panasonic):
 
 @pytest.mark.skipif(not (DATA / "lgm50_wmg" / "pulses_T25C.csv").is_file()
                     or not (DATA / "panasonic_18650pf").is_dir(), reason="measured data not available (../shared/data)")
-def test_the_shipped_prior_is_the_scripts_derivation(panasonic):
-    spec = importlib.util.spec_from_file_location("cold_resistance_prior", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+def test_the_shipped_prior_is_the_scripts_derivation(panasonic, repo_script):
+    module = repo_script(str(SCRIPT.relative_to(REPO)))
     res = module.derive(DATA)
     assert res["at"][1.0]["fraction"] == pytest.approx(0.216, abs=5e-4)
     assert res["panasonic_step_ohm"] == pytest.approx(0.03205, abs=5e-5)

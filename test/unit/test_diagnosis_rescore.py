@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -10,15 +9,12 @@ import pytest
 
 from battery_predictor.diagnosis import decision
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "diagnosis_rescore.py"
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
-def rescore():
-    spec = importlib.util.spec_from_file_location("diagnosis_rescore", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def rescore(repo_script):
+    return repo_script("benchmarks/diagnosis_rescore.py")
 
 
 def case(baseline_mv, candidates, reference_mv=6.0, noise_mv=3.0, shift_k=0.0, truth="resistance_growth"):
@@ -50,7 +46,7 @@ def test_a_constant_set_for_the_rescoring_changes_the_decision(rescore, tmp_path
 
 
 def test_the_stored_cases_file_reads(rescore):
-    stored = SCRIPT.parents[1] / "docs" / "diagnosis_issue12" / "decision_cases.jsonl"
+    stored = REPO / "docs" / "diagnosis_issue12" / "decision_cases.jsonl"
     cases = [json.loads(line) for line in stored.read_text().splitlines()]
     assert {c["label"] for c in cases} == {"tuning", "verdict", "verdict2", "tuning_offset", "verdict3",
                                              "verdict4", "verdict5"}

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from pathlib import Path
 
@@ -15,17 +14,13 @@ from battery_predictor.prediction.pack_model import engine_pack
 from battery_predictor.recording import Recording
 
 REPO = Path(__file__).resolve().parents[2]
-SCRIPT = REPO / "benchmarks" / "runtime_error_split.py"
 PARAMS = REPO / "params" / "panasonic_18650pf.yaml"
 START_SOC = 0.83
 
 
 @pytest.fixture(scope="module")
-def split():
-    spec = importlib.util.spec_from_file_location("runtime_error_split", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def split(repo_script):
+    return repo_script("benchmarks/runtime_error_split.py")
 
 
 @pytest.fixture(scope="module")
