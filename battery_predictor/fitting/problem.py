@@ -21,6 +21,9 @@ from battery_predictor.simulation.load import StepLoad
 END_LOAD_WINDOW_S = 60.0
 #: Below this |current| / nominal capacity (1/h) a recording is taken to start at rest.
 _REST_C_RATE = 0.02
+#: A recording that starts at rest gives its open-circuit voltage as the mean of its rest samples within this
+#: many seconds of its start (s): one sample carries the sensor's noise and quantisation whole.
+REST_AVERAGE_S = 60.0
 
 
 def trim_to_discharge(rec: Recording) -> Recording:
@@ -44,8 +47,9 @@ def request_for_recording(params: PackParams, rec: Recording, *, initial_state: 
     Parameters
     ----------
     initial_state : {"auto", "params", "voltage"}
-        ``"params"``: the params' initial concentrations; ``"voltage"``: the first measured
-        voltage taken as pack open-circuit voltage (valid when the recording starts at rest);
+        ``"params"``: the params' initial concentrations; ``"voltage"``: the starting voltage
+        (:func:`initial_voltage_v`: the mean of a starting rest, else the first sample) taken as pack
+        open-circuit voltage (valid when the recording starts at rest);
         ``"auto"``: ``"params"`` when initial concentrations are fitted or the recording does not
         start at rest, else ``"voltage"``.
     extend_s : float
@@ -60,7 +64,7 @@ def request_for_recording(params: PackParams, rec: Recording, *, initial_state: 
         at_rest = starts_at_rest(params, rec)
         fits_initial = any(p.startswith("Initial concentration") for p in params.fit.parameters)
         initial_state = "voltage" if at_rest and not fits_initial else "params"
-    ocv = float(rec.voltage_v[0]) if initial_state == "voltage" else None
+    ocv = initial_voltage_v(params, rec) if initial_state == "voltage" else None
     out_t = rec.relative_time_s
     if extend_s > 0:
         dt = float(np.median(np.diff(out_t)))
@@ -81,10 +85,30 @@ def end_current_a(load: StepLoad) -> float:
     return max(load.mean_current_a(END_LOAD_WINDOW_S), load.mean_current_a(), 0.0)
 
 
+def _at_rest(params: PackParams, current_a: np.ndarray) -> np.ndarray:
+    """Which currents (A) are below :data:`_REST_C_RATE` of the pack's nominal capacity."""
+    capacity_ah = float(params.pack_info.get("nominal_capacity_ah", 0.0)) or 1.0
+    return np.abs(np.asarray(current_a, dtype=float)) / capacity_ah < _REST_C_RATE
+
+
 def starts_at_rest(params: PackParams, rec: Recording) -> bool:
     """True when the recording's first current is below :data:`_REST_C_RATE` of the pack's nominal capacity."""
-    capacity_ah = float(params.pack_info.get("nominal_capacity_ah", 0.0)) or 1.0
-    return abs(float(rec.current_a[0])) / capacity_ah < _REST_C_RATE
+    return bool(_at_rest(params, rec.current_a[:1])[0])
+
+
+def initial_voltage_v(params: PackParams, rec: Recording) -> float:
+    """The recording's starting pack voltage (V) as an open-circuit voltage estimate.
+
+    A recording that starts at rest: the mean voltage of its leading rest samples within
+    :data:`REST_AVERAGE_S` of the first (up to the first sample under load), which averages the
+    sensor's noise and quantisation out of the state it sets. Otherwise the first sample.
+    """
+    rest = _at_rest(params, rec.current_a)
+    if not rest[0]:
+        return float(rec.voltage_v[0])
+    n_rest = int(np.argmin(rest)) if not rest.all() else rest.size
+    n_window = int(np.searchsorted(rec.time_s, rec.time_s[0] + REST_AVERAGE_S, side="right"))
+    return float(np.mean(rec.voltage_v[:max(1, min(n_rest, n_window))]))
 
 
 #: Secant passes of :func:`loaded_start_ocv_v`.

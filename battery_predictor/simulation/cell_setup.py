@@ -162,10 +162,14 @@ def with_thermal(params: PackParams, mode: str) -> PackParams:
 #: at 0 and 100 % SOC) starts the cell at that end of the range, with a warning; sensor offset and
 #: quantisation put a full pack's rest voltage a few mV above a model's 100 % OCV.
 OCV_CLAMP_TOLERANCE_V = 0.03
+#: ... and within this much (V per cell) without the warning: an averaged rest reading of a full (or empty)
+#: cell lands this close to the edge by its noise alone.
+OCV_CLAMP_SILENT_V = 5e-4
 
 
 def _clamped_ocv_v(pv: Any, ocv_v: float) -> float:
-    """``ocv_v`` moved into the params' OCV range when it lies within :data:`OCV_CLAMP_TOLERANCE_V` outside it."""
+    """``ocv_v`` moved into the params' OCV range when it lies within :data:`OCV_CLAMP_TOLERANCE_V` outside it
+    (with a warning beyond :data:`OCV_CLAMP_SILENT_V`)."""
     try:
         v_min = float(pv["Open-circuit voltage at 0% SOC [V]"])
         v_max = float(pv["Open-circuit voltage at 100% SOC [V]"])
@@ -173,6 +177,8 @@ def _clamped_ocv_v(pv: Any, ocv_v: float) -> float:
         return ocv_v
     for edge, outside in ((v_max, ocv_v > v_max), (v_min, ocv_v < v_min)):
         if outside and abs(ocv_v - edge) <= OCV_CLAMP_TOLERANCE_V:
+            if abs(ocv_v - edge) <= OCV_CLAMP_SILENT_V:
+                return edge
             warnings.warn(f"initial open-circuit voltage {ocv_v:.4f} V per cell lies {1e3 * abs(ocv_v - edge):.1f} mV "
                           f"outside the params' range; starting at {edge:.4f} V "
                           f"({'full' if edge == v_max else 'empty'})", UserWarning, stacklevel=3)

@@ -29,5 +29,6 @@ def test_a_far_truth_is_fitted_to_the_noise_and_its_held_out_runtime_within_one_
     assert out["fit_rmse_mv"] < 2 * (gen.NOISE_V * 1e3 + 2.9)
     assert abs(out["heldout_runtime_error_vs_noise_free_pct"]) < 1.0
     assert all(out["determined"].values())
-    # the held-out day within 1.5x of what the true model itself scores there (its first voltage, its 0.1 A reading)
-    assert out["heldout_rmse_to_threshold_mv"] < 1.5 * out["truth_model_rmse_to_threshold_mv"]
+    # the held-out day within twice the noise (issue 17), or within 1.5x of what the true model itself scores there
+    # (its starting rest, its 0.1 A reading) on a day where the sensor puts that floor higher
+    assert out["heldout_rmse_to_threshold_mv"] < max(2 * gen.NOISE_V * 1e3, 1.5 * out["truth_model_rmse_to_threshold_mv"])

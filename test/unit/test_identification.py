@@ -379,6 +379,10 @@ def test_a_rest_voltage_just_above_full_starts_full_with_a_warning_and_far_above
     with pytest.warns(UserWarning, match="outside the params' range; starting at"):
         got = initial_concentrations(ranger, pv, initial_soc=None, initial_cell_ocv_v=v_full + 0.001)
     assert got == pytest.approx(full, rel=1e-4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an averaged reading a fraction of a millivolt above full: no warning
+        assert initial_concentrations(ranger, pv, initial_soc=None, initial_cell_ocv_v=v_full + 1e-4) == \
+            pytest.approx(full, rel=1e-4)
     with pytest.raises(SimulationError, match="outside the voltage limits"):
         initial_concentrations(ranger, pv, initial_soc=None, initial_cell_ocv_v=v_full + 2 * OCV_CLAMP_TOLERANCE_V)
 

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from battery_predictor.fitting.identifiable import FULL_OCV_MARGIN_V
-from battery_predictor.fitting.problem import loaded_start_ocv_v, request_for_recording, starts_at_rest
+from battery_predictor.fitting.problem import (
+    REST_AVERAGE_S,
+    initial_voltage_v,
+    loaded_start_ocv_v,
+    request_for_recording,
+    starts_at_rest,
+)
 from battery_predictor.params import load_params
 from battery_predictor.recording import Recording
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
@@ -39,7 +45,37 @@ def test_a_recording_at_rest_keeps_its_first_voltage(temi_params):
     rec = _recording(temi_params, load, 15.6)
     assert starts_at_rest(temi_params, rec)
     assert loaded_start_ocv_v(temi_params, rec, get_simulator("engine")) == float(rec.voltage_v[0])
-    assert request_for_recording(temi_params, rec, initial_state="voltage").initial_pack_ocv_v == rec.voltage_v[0]
+    assert request_for_recording(temi_params, rec, initial_state="voltage").initial_pack_ocv_v == \
+        pytest.approx(rec.voltage_v[0], abs=1e-9)
+
+
+def _noisy(time_s: np.ndarray, current_a: np.ndarray, seed: int = 3) -> Recording:
+    """15.6 V at rest read with 5 mV noise and 10 mV steps, then lower under load."""
+    rng = np.random.default_rng(seed)
+    v = np.round((np.where(current_a > 0, 15.2, 15.6) + rng.normal(0.0, 0.005, time_s.size)) / 0.01) * 0.01
+    return Recording(time_s, v, current_a, source="noisy")
+
+
+def test_a_starting_rest_gives_its_ocv_as_the_mean_of_its_samples_not_one_quantised_reading(temi_params):
+    t = np.arange(0.0, 600.0, 5.0)
+    rec = _noisy(t, np.where(t < 300.0, 0.0, 10.0))
+    first_minute = t <= REST_AVERAGE_S
+    assert initial_voltage_v(temi_params, rec) == pytest.approx(np.mean(rec.voltage_v[first_minute]))
+    assert request_for_recording(temi_params, rec, initial_state="voltage").initial_pack_ocv_v == \
+        pytest.approx(np.mean(rec.voltage_v[first_minute]))
+
+
+def test_a_rest_shorter_than_the_average_stops_at_the_first_sample_under_load(temi_params):
+    t = np.arange(0.0, 600.0, 5.0)
+    rec = _noisy(t, np.where(t < 20.0, 0.0, 10.0))
+    assert initial_voltage_v(temi_params, rec) == pytest.approx(np.mean(rec.voltage_v[:4]))
+    assert initial_voltage_v(temi_params, rec) > 15.5  # the loaded samples (15.2 V) are not averaged in
+
+
+def test_a_start_under_load_keeps_its_first_sample(temi_params):
+    t = np.arange(0.0, 600.0, 5.0)
+    rec = _noisy(t, np.full(t.size, 10.0))
+    assert initial_voltage_v(temi_params, rec) == rec.voltage_v[0]
 
 
 class _DropsMoreNearFull:
