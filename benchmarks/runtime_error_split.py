@@ -41,10 +41,7 @@ END_TOLERANCE_S = 60.0
 
 def _future_estimator(core, win, now_s: float, end_s: float):
     """A load estimator of the core's settings fed the windows after ``now_s`` up to ``end_s``."""
-    from battery_predictor.prediction.load_estimate import LoadEstimator
-
-    cfg = core.config
-    est = LoadEstimator(cfg.charge_current_a, cfg.charge_session_s, cfg.load_estimator, cfg.load_time_constant_s)
+    est = core._fresh_load_estimator()
     ahead = (win.time_s > now_s) & (win.time_s <= end_s)
     for t, i, peak, v in zip(win.time_s[ahead], win.current_a[ahead], win.peak_current_a[ahead],
                              win.voltage_v[ahead], strict=True):
@@ -123,10 +120,13 @@ def split_recording(params, rec, cutoff_v: float) -> dict:
 
 
 def figures(rows: list[dict], key: str) -> dict:
-    err = np.array([r[key] - r["true_min"] for r in rows])
+    """MAE and bias (min, :func:`~battery_predictor.evaluation.runtime_eval.error_summary`) of the answers ``key``,
+    and how many after the first 30 % of the discharge are off by more than half the true remaining time."""
+    from battery_predictor.evaluation.runtime_eval import error_summary
+
+    summary = error_summary([(60.0 * r[key], 60.0 * r["true_min"]) for r in rows])
     late = [abs(r[key] - r["true_min"]) / r["true_min"] > 0.5 for r in rows if r["fraction"] > 0.3]
-    return {"mae_min": float(np.nanmean(np.abs(err))), "bias_min": float(np.nanmean(err)),
-            "over_half_after_30pct": int(sum(late))}
+    return {"mae_min": summary["mae_min"], "bias_min": summary["bias_min"], "over_half_after_30pct": int(sum(late))}
 
 
 def main() -> int:

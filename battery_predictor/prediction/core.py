@@ -254,8 +254,7 @@ class PredictorCore:
             raise ValueError(f"load_model {config.load_model!r} is not one of {', '.join(LOAD_MODELS)}")
         if not 0.0 < config.decision_risk <= 0.5:
             raise ValueError(f"decision_risk must be in (0, 0.5], got {config.decision_risk}")
-        self._load = LoadEstimator(config.charge_current_a, config.charge_session_s, config.load_estimator,
-                                   config.load_time_constant_s)
+        self._load = self._fresh_load_estimator()
         #: Why the next calibration must start afresh ("" = it may continue the last one).
         self._recalibrate_reason = ""
         self._drift_v = math.nan  # residual of the last carried state that left the tolerance band (V)
@@ -298,6 +297,11 @@ class PredictorCore:
                 self._currents = load_ranger_currents(config.route_currents_file)
             except BatteryPredictorError as exc:
                 self.model_error = self.model_error or str(exc)
+
+    def _fresh_load_estimator(self) -> LoadEstimator:
+        """An empty load estimator of this core's settings."""
+        cfg = self.config
+        return LoadEstimator(cfg.charge_current_a, cfg.charge_session_s, cfg.load_estimator, cfg.load_time_constant_s)
 
     def _resistance(self, temperature_k: float) -> float:
         """The pack's 5 s pulse resistance at ``temperature_k`` (cached per kelvin; NaN when the model fails)."""
