@@ -232,7 +232,8 @@ class PredictorNode(Node):
                                        ESTIMATORS),
             load_model=declare_str(self, "load_model", PredictorConfig.load_model,
                                    "What of the average load stays constant ahead: 'auto' (the cycle's windows "
-                                   "decide; a constant power until they can), 'power' (the current rises as the "
+                                   "decide; until they can, the params' operating.load_prior_power_fraction, default a "
+                                   "constant power), 'power' (the current rises as the "
                                    "pack voltage falls, as behind DC-DC converters and drives) or 'current' "
                                    "(the paper's).", LOAD_MODELS),
             load_time_constant_s=declare_float(self, "load_time_constant_s", _core_default("load_time_constant_s"),

@@ -94,7 +94,9 @@ class PredictorConfig:
         What of the average load stays constant ahead: ``"power"`` (the current rises as the pack
         voltage falls, as behind DC-DC converters and motor drives), ``"current"`` (the paper's),
         or ``"auto"`` (default): the cycle's own windows decide (:func:`.load_estimate.load_kind`),
-        a constant power while they cannot tell (it errs early, never late, on a current load).
+        and while they cannot tell (random usage needs most of a discharge), the params' prior
+        ``operating.load_prior_power_fraction`` (default 1, a constant power: it errs early, never
+        late, on a current load; the Temi's params say 0, its usage model's constant-current states).
         Measured in docs/runtime_real_data: on the Panasonic drive cycles (constant power) MAE
         7.3 / 7.5 / 12.6 min for power / auto / current; on the emulated Temi bags (constant-current
         steps) 36.1 / 26.9 / 19.1 min.
@@ -185,8 +187,12 @@ class PredictorConfig:
 LOAD_MODELS = ("auto", "power", "current")
 #: Where a carried state that left the tolerance band goes (``PredictorConfig.drift_correction``).
 DRIFT_CORRECTIONS = ("full", "smallest")
-#: Exponent of the ``"auto"`` load model while the cycle's data cannot tell current from power.
+#: Exponent of the ``"auto"`` load model while the cycle's data cannot tell current from power, unless the
+#: params say otherwise (:data:`LOAD_PRIOR_KEY`): a constant power errs early, never late, on a current load.
 AUTO_LOAD_PRIOR = 1.0
+#: ``operating`` key of a params file: the robot's load as a power fraction (1 = constant power, 0 = constant
+#: current) that the ``"auto"`` load model assumes until the cycle's windows decide.
+LOAD_PRIOR_KEY = "load_prior_power_fraction"
 
 
 def _load_text(current_a: float, power_w: float | None, kind: LoadKind, now_a: float) -> str:
@@ -285,6 +291,9 @@ class PredictorCore:
         self.uncertainty = uncertainty_model(self.params.provenance if self.params else {}, series,
                                              self.default_temperature_k if not self.params
                                              else self.params.ambient_temperature_k)
+        #: Exponent of the ``"auto"`` load model while the cycle's windows cannot tell current from power.
+        self.load_kind_prior = float(self.params.operating.get(LOAD_PRIOR_KEY, AUTO_LOAD_PRIOR)) if self.params \
+            else AUTO_LOAD_PRIOR
         self.state_tolerance_v = config.state_tolerance_v_per_cell * series
         self.jump_tolerance_v = config.jump_tolerance_v_per_cell * series
         self._resistance_cache: dict[int, float] = {}
@@ -646,7 +655,7 @@ class PredictorCore:
             return LoadKind(1.0, math.nan, math.nan, 0, False)
         if self.config.load_model == "current":
             return LoadKind(0.0, math.nan, math.nan, 0, False)
-        return self._load.kind(resistance_ohm, AUTO_LOAD_PRIOR)
+        return self._load.kind(resistance_ohm, self.load_kind_prior)
 
     def can_accept_route(self, sections: Sequence[RouteSection], now_s: float, *, starts_away_from_charger: bool = False,
                          ends_away_from_charger: bool = False) -> RouteDecision:

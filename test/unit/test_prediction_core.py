@@ -263,3 +263,39 @@ def test_core_default_load_model_is_auto_and_current_is_the_papers(temi_runner):
     assert PredictorConfig(params_file="x").load_model == "auto"
     with pytest.raises(ValueError, match="load_model"):
         PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml"), load_model="torque"))
+
+
+def _undecided_reason(params_path: Path) -> str:
+    """The runtime reason after ten minutes of a varying load: too short for the windows to tell current from power."""
+    core = PredictorCore(PredictorConfig(params_file=str(params_path), peak_current_quantile=0.0))
+    rng = np.random.default_rng(3)
+    for k in range(120):
+        current_a = float(rng.choice([1.5, 2.0, 4.0]))
+        core.update_state(5.0 * k, 15.6 - 0.1 * current_a, current_a, 298.15)
+    answer = core.remaining_runtime(5.0 * 119)
+    assert answer.valid, answer.reason
+    return answer.reason
+
+
+def test_an_undecided_load_follows_the_params_prior_constant_current_for_the_temi(tmp_path):
+    # temi.yaml: operating.load_prior_power_fraction 0, its usage model's constant-current states
+    assert PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml"))).load_kind_prior == 0.0
+    assert " W (now " not in _undecided_reason(PARAMS / "temi.yaml")
+    text = (PARAMS / "temi.yaml").read_text().replace("load_prior_power_fraction: 0.0", "load_prior_power_fraction: 1.0")
+    power = tmp_path / "temi_power.yaml"
+    power.write_text(text)
+    assert " W (now " in _undecided_reason(power)
+
+
+def test_without_a_params_prior_an_undecided_load_is_a_constant_power():
+    assert PredictorCore(PredictorConfig(params_file=str(PARAMS / "panasonic_18650pf.yaml"))).load_kind_prior == 1.0
+
+
+def test_a_load_prior_outside_zero_to_one_is_refused(tmp_path):
+    from battery_predictor.errors import ParamsError
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((PARAMS / "temi.yaml").read_text().replace("load_prior_power_fraction: 0.0",
+                                                              "load_prior_power_fraction: 1.5"))
+    with pytest.raises(ParamsError, match="load_prior_power_fraction"):
+        load_params(bad)

@@ -1,0 +1,112 @@
+"""Remaining runtime of a Temi pack whose truth is drawn far from the shipped params, as a user gets it.
+
+For each seed: the truth pack and its two days of ``identification_far_truth.py`` (lumped thermal cells,
+5 s samples with 5 mV noise, 10 mV / 0.1 A quantisation, the Temi usage model's constant-current states);
+day 1 is fitted with ``battery-predictor fit --params params/temi.yaml`` at its defaults, day 2 (from rest
+at 4.0 V per cell) is cut at its first sample at or below 13.30 V (the robot returns to its charger there)
+and scored as ``evaluate-runtime`` scores a recording: the predictor's core at its defaults fed the 5 s
+windows, nine checkpoints (10 % .. 90 % of the discharge). A day 2 that never reaches 13.30 V is skipped and
+said so.
+
+``--load-prior power`` removes the fitted params' ``operating.load_prior_power_fraction`` before scoring:
+the predictor's ``load_model auto`` then assumes a constant power until the day's windows decide, as
+before 2026-11-28.
+
+Run::
+
+    nice .venv/bin/python benchmarks/runtime_far_truth.py --seeds 60 61 62 [--load-prior params|power] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+import identification_far_truth as far  # noqa: E402
+
+from battery_predictor.evaluation.runtime_eval import error_summary, evaluate_recording  # noqa: E402
+from battery_predictor.fitting.identifiable import pybamm_values  # noqa: E402
+from battery_predictor.io.loader import load_recording  # noqa: E402
+from battery_predictor.params import load_params  # noqa: E402
+from battery_predictor.prediction.core import LOAD_PRIOR_KEY  # noqa: E402
+from battery_predictor.recording import Recording  # noqa: E402
+
+THRESHOLD_V = 13.30
+
+
+def _write_csv(rec: Recording, path: Path, n: int | None = None) -> None:
+    n = rec.time_s.size if n is None else n
+    rows = np.column_stack([rec.relative_time_s[:n], rec.voltage_v[:n], rec.current_a[:n], np.full(n, 25.0)])
+    np.savetxt(path, rows, delimiter=",", header="time_s,voltage_V,current_A,temperature_C", comments="", fmt="%.6g")
+
+
+def run_seed(seed: int, load_prior: str, work: Path) -> dict:
+    """Draw the truth of ``seed``, fit its day 1 with the CLI, score the predictor on its day 2."""
+    params = load_params(REPO / "params" / "temi.yaml")
+    truth = far.draw_truth(params, np.random.default_rng(1000 + seed))
+    truth_params = params.with_values(pybamm_values(params, truth)[0])
+    fit_day, _, _ = far.day(truth_params, 2 * seed + 1, None, "temi")
+    test_day, _, _ = far.day(truth_params, 2 * seed + 2, 4.0, "temi")
+    below = np.flatnonzero(test_day.voltage_v <= THRESHOLD_V)
+    if not below.size:
+        return {"seed": seed, "skipped": f"day 2 never reaches {THRESHOLD_V} V"}
+    fit_csv, test_csv, fit_yaml = work / f"s{seed}_day1.csv", work / f"s{seed}_day2.csv", work / f"fit{seed}.yaml"
+    _write_csv(fit_day, fit_csv)
+    _write_csv(test_day, test_csv, int(below[0]) + 1)
+    subprocess.run([sys.executable, "-m", "battery_predictor.cli.main", "fit", "--params",
+                    str(REPO / "params" / "temi.yaml"), "--data", str(fit_csv), "--out", str(fit_yaml)],
+                   check=True, capture_output=True, cwd=REPO)
+    fitted = load_params(fit_yaml)
+    if load_prior == "power":
+        operating = {k: v for k, v in fitted.operating.items() if k != LOAD_PRIOR_KEY}
+        fitted = replace(fitted, operating=operating)
+    result = evaluate_recording(fitted, load_recording(test_csv), cutoff_v=THRESHOLD_V, capacities_ah={})
+    errors = [(c.predicted_s, c.true_remaining_s) for c in result.checkpoints]
+    late = [(c.predicted_s, c.true_remaining_s) for c in result.checkpoints if c.fraction >= 0.3 - 1e-9]
+    over_half = sum(1 for p, t in late if not abs(p - t) <= 0.5 * t)
+    return {"seed": seed, "errors_min": [round((p - t) / 60.0, 1) for p, t in errors],
+            "summary": error_summary(errors, late_fraction_pairs=late), "off_by_half_after_30pct": over_half,
+            "answers_after_30pct": len(late)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[60])
+    ap.add_argument("--load-prior", choices=("params", "power"), default="params")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        rows = [run_seed(s, args.load_prior, Path(tmp)) for s in args.seeds]
+    scored = [r for r in rows if "summary" in r]
+    pooled = [abs(e) for r in scored for e in r["errors_min"]]
+    if args.json:
+        print(json.dumps({"load_prior": args.load_prior, "seeds": rows,
+                          "pooled_mae_min": float(np.mean(pooled)) if pooled else None}, indent=1, default=float))
+        return
+    for r in rows:
+        if "skipped" in r:
+            print(f"seed {r['seed']}: skipped ({r['skipped']})")
+        else:
+            s = r["summary"]
+            print(f"seed {r['seed']}: MAE {s['mae_min']:.1f} min, bias {s['bias_min']:+.1f} min; errors "
+                  + " ".join(f"{e:+.1f}" for e in r["errors_min"]))
+    if pooled:
+        off = sum(r["off_by_half_after_30pct"] for r in scored)
+        after = sum(r["answers_after_30pct"] for r in scored)
+        print(f"pooled over {len(scored)} days ({len(pooled)} answers), load prior {args.load_prior}: "
+              f"MAE {np.mean(pooled):.1f} min, off by more than half after 30 %: {off} of {after}")
+
+
+if __name__ == "__main__":
+    main()
