@@ -1,0 +1,136 @@
+"""Route answers for a Ranger pack whose truth is drawn far from the shipped params: how often wrong, which way.
+
+For each seed: the truth LiFePO4 pack and its two days of ``identification_far_truth.py`` (lumped thermal
+cells, 5 s samples with 5 mV noise, 10 mV / 0.1 A quantisation, longest routes at random payloads with
+standstills between them). Day 1 is fitted with ``battery-predictor fit --params params/ranger_mini.yaml``
+at its defaults. Along day 2, every ``--every`` minutes, the predictor's core (node defaults; fed day 2's
+samples so far, as the monitor's windows) is asked ``/can_accept_route`` for the longest route with a
+payload drawn from 0-80 kg. The truth answers the same question: the truth pack, driven by day 2's load up
+to that moment and then by the route with each curve point's current drawn from the measured (payload,
+slope) samples (as the paper's experiments), ends the route's last standstill at or above 46.31 V (a
+cell reaching its cut-off during the route is a "no").
+
+Printed: accepted / rejected against the truth, **unsafe accepts** (yes where the truth says no; must be 0),
+wasted rejects, and the error of the P50 voltage after the route against the truth's.
+
+Run::
+
+    nice .venv/bin/python benchmarks/route_far_truth.py --seeds 60 61 [--every 20] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+import identification_far_truth as far  # noqa: E402
+
+from battery_predictor.fitting.identifiable import pybamm_values  # noqa: E402
+from battery_predictor.params import load_params  # noqa: E402
+from battery_predictor.prediction.core import PredictorConfig, PredictorCore  # noqa: E402
+from battery_predictor.profiles import load_ranger_currents, longest_route, route_profile  # noqa: E402
+from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator  # noqa: E402
+
+THRESHOLD_V = 46.31
+
+
+def truth_after_route(truth_params, day_load: StepLoad, at_s: float, route_load: StepLoad) -> float:
+    """The truth pack's voltage (V) at the end of the route started ``at_s`` into the day; NaN if it stops."""
+    thermal = replace(truth_params, options={**truth_params.options, "thermal": "lumped"})
+    load = day_load.truncate(at_s).append(route_load)
+    end_s = load.duration_s - 1.0
+    # a grid to the end: a pack that stops on the way returns the samples up to its stop
+    req = SimulationRequest(load=load, output_time_s=np.append(np.arange(0.0, end_s, 30.0), end_s),
+                            initial_pack_ocv_v=far.PACKS["ranger"][2] * truth_params.series)
+    res = get_simulator("fast").simulate(thermal, req)
+    if res.time_s.size < 2 or res.time_s[-1] < end_s - 1e-6:
+        return math.nan
+    return float(res.pack_voltage_v[-1])
+
+
+def run_seed(seed: int, every_min: float, work: Path) -> dict:
+    """Fit day 1 of ``seed``'s truth with the CLI, then score the route answers along day 2."""
+    params = load_params(REPO / "params" / "ranger_mini.yaml")
+    truth = far.draw_truth(params, np.random.default_rng(1000 + seed))
+    truth_params = params.with_values(pybamm_values(params, truth)[0])
+    fit_day, _, _ = far.day(truth_params, 2 * seed + 1, None, "ranger")
+    test_day, _, test_load = far.day(truth_params, 2 * seed + 2, far.PACKS["ranger"][2], "ranger")
+    fit_csv, fit_yaml = work / f"r{seed}_day1.csv", work / f"r{seed}_fit.yaml"
+    rows = np.column_stack([fit_day.relative_time_s, fit_day.voltage_v, fit_day.current_a,
+                            np.full(fit_day.time_s.size, 25.0)])
+    np.savetxt(fit_csv, rows, delimiter=",", header="time_s,voltage_V,current_A,temperature_C", comments="")
+    subprocess.run([sys.executable, "-m", "battery_predictor.cli.main", "fit", "--params",
+                    str(REPO / "params" / "ranger_mini.yaml"), "--data", str(fit_csv), "--out", str(fit_yaml)],
+                   check=True, capture_output=True, cwd=REPO)
+    core = PredictorCore(PredictorConfig(params_file=str(fit_yaml)))
+    currents = load_ranger_currents()
+    rng = np.random.default_rng(5000 + seed)
+    t, v, i = test_day.relative_time_s, test_day.voltage_v, test_day.current_a
+    answers, k = [], 0
+    for at_s in np.arange(every_min * 60.0, t[-1], every_min * 60.0):
+        while k < t.size and t[k] <= at_s:
+            core.update_state(float(t[k]), float(v[k]), float(i[k]), 298.15)
+            core.precalibrate()
+            k += 1
+        payload = float(rng.uniform(0.0, 80.0))
+        route = longest_route(payload)
+        decision = core.can_accept_route(route.sections, float(t[k - 1]))
+        route_load = StepLoad.from_profile(route_profile(route, currents, seed=rng, mode="sampled"))
+        truth_v = truth_after_route(truth_params, test_load, float(t[k - 1]), route_load)
+        answers.append({"at_min": round(float(t[k - 1]) / 60.0, 1), "payload_kg": round(payload, 1),
+                        "accepted": decision.accepted, "truth_yes": bool(truth_v >= THRESHOLD_V),
+                        "predicted_v": decision.predicted_voltage_v, "truth_v": truth_v,
+                        "reason": decision.reason})
+    return {"seed": seed, "answers": answers}
+
+
+def tally(answers: list[dict]) -> dict:
+    """Counts of right and wrong answers and the P50 voltage error (V) where both ends are known."""
+    unsafe = [a for a in answers if a["accepted"] and not a["truth_yes"]]
+    wasted = [a for a in answers if not a["accepted"] and a["truth_yes"]]
+    err = [a["predicted_v"] - a["truth_v"] for a in answers
+           if math.isfinite(a["predicted_v"]) and math.isfinite(a["truth_v"])]
+    return {"questions": len(answers), "truth_yes": sum(a["truth_yes"] for a in answers),
+            "accepted": sum(a["accepted"] for a in answers), "unsafe_accepts": len(unsafe),
+            "wasted_rejects": len(wasted), "voltage_mae_v": float(np.mean(np.abs(err))) if err else math.nan,
+            "voltage_bias_v": float(np.mean(err)) if err else math.nan}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[60])
+    ap.add_argument("--every", type=float, default=20.0, help="minutes between route questions along day 2")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        rows = [run_seed(s, args.every, Path(tmp)) for s in args.seeds]
+    pooled = tally([a for r in rows for a in r["answers"]])
+    if args.json:
+        print(json.dumps({"seeds": rows, "pooled": pooled}, indent=1, default=float))
+        return
+    for r in rows:
+        s = tally(r["answers"])
+        print(f"seed {r['seed']}: {s['questions']} questions, truth yes {s['truth_yes']}, accepted {s['accepted']}, "
+              f"unsafe accepts {s['unsafe_accepts']}, wasted rejects {s['wasted_rejects']}, P50 voltage error "
+              f"{s['voltage_mae_v']:.3f} V (bias {s['voltage_bias_v']:+.3f} V)")
+        for a in r["answers"]:
+            if a["accepted"] != a["truth_yes"]:
+                print(f"  {'UNSAFE' if a['accepted'] else 'wasted'} at {a['at_min']} min, {a['payload_kg']} kg: "
+                      f"predicted {a['predicted_v']:.2f} V, truth {a['truth_v']:.2f} V; {a['reason'][:140]}")
+    print(f"pooled: {json.dumps(pooled)}")
+
+
+if __name__ == "__main__":
+    main()
