@@ -112,7 +112,9 @@ class ReplaySession:
             self._nodes.append(self.monitor)
             if self.monitor.config.input_style != stream.style:
                 raise BagError(f"{stream.source}: the bag has {stream.style} topics but the monitor's input_style is "
-                               f"{self.monitor.config.input_style} (use the node params of this robot)")
+                               f"{self.monitor.config.input_style} (use the node params of the robot that recorded it, "
+                               f"set battery_monitor input_style: {stream.style} in a copy of them, or remake the bag "
+                               f"with `battery-predictor bag from-csv --style {self.monitor.config.input_style}`)")
             self.predictor = PredictorNode(core=predictor_core, cli_args=cli, parameter_overrides=_overrides(
                 {**(predictor_overrides or {}), **sim}), **kw)
             self._nodes.append(self.predictor)

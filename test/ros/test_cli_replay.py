@@ -96,6 +96,17 @@ def test_replay_refuses_a_pack_params_file_and_an_existing_output(short_bag: Pat
     assert (tmp_path / "o" / "outputs" / "keep.txt").exists()
 
 
+def test_replay_of_a_bag_in_the_other_input_style_says_how_to_fix_it(tmp_path: Path) -> None:
+    t = np.arange(0.0, 600.0, 5.0)
+    bag = tmp_path / "battery_state_bag"
+    write_recording_bag(Recording(t, 15.6 - 1e-4 * t, np.full(t.size, 1.5), np.full(t.size, 297.0)), bag,
+                        style="battery_state")
+    proc = subprocess.run([str(CLI), "replay", str(bag), "--params", str(REPO / "params/ros/temi_nodes.yaml"),
+                           "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert "input_style: battery_state" in proc.stderr and "--style relay" in proc.stderr
+
+
 @pytest.fixture(scope="module")
 def measured_bag(tmp_path_factory) -> Path:
     """40 min at 5 s of a relay recording that reaches the temi cut-off (13.30 V) and has no truth metadata."""
