@@ -156,8 +156,8 @@ def _temi(context: Context, bag: Path, out: Path, rate: float, runtime_period_s:
         e = error_summary(checkpoints)
         print(f"   MAE {e['mae_min']:.1f} min, max |error| {e['max_abs_error_min']:.1f} min, MAPE {e['mape_pct']:.1f} % "
               "(seed paper, real Temi: MAE 14.92 min, MAPE 18.9 %)")
-        print("   the node's load model is 'auto': a constant power until the cycle shows otherwise, which errs early")
-        print("   here, since the emulated bag draws constant currents (load_model current: docs/runtime_real_data)")
+        print("   the node's load model is 'auto': until the cycle shows otherwise, the Temi params' prior, a constant")
+        print("   current (operating.load_prior_power_fraction; docs/runtime_real_data, \"The Temi's load prior\")")
     print("\n".join(task_lines))
     print(f"   plot {png}; node outputs {out / 'temi_outputs'} (MCAP)\n")
 
