@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
+import sys
 import time
 import warnings
 from dataclasses import replace
@@ -98,6 +100,19 @@ def day(truth_params, seed: int, initial_ocv_v: float | None, pack: str = "temi"
     i = np.round(load.current_at(res.time_s) / 0.1) * 0.1
     rec = Recording(res.time_s, v, i, temperature_k=np.full(res.time_s.size, 298.15), source=f"{pack}-day-{seed}")
     return rec, res.pack_voltage_v, load
+
+
+def write_day_csv(rec: Recording, path: Path, n: int | None = None) -> None:
+    """The first ``n`` samples of a day (all by default) as a CSV that `battery-predictor` reads, at 25 degC."""
+    n = rec.time_s.size if n is None else n
+    rows = np.column_stack([rec.relative_time_s[:n], rec.voltage_v[:n], rec.current_a[:n], np.full(n, 25.0)])
+    np.savetxt(path, rows, delimiter=",", header="time_s,voltage_V,current_A,temperature_C", comments="", fmt="%.6g")
+
+
+def fit_with_cli(params_path: Path, data_csv: Path, out_yaml: Path) -> None:
+    """``battery-predictor fit --params PARAMS --data CSV --out OUT`` at its defaults, as a user runs it."""
+    subprocess.run([sys.executable, "-m", "battery_predictor.cli.main", "fit", "--params", str(params_path),
+                    "--data", str(data_csv), "--out", str(out_yaml)], check=True, capture_output=True, cwd=REPO)
 
 
 def time_to_v(t, v, threshold_v) -> float | None:

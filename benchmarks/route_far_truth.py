@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import subprocess
 import sys
 import tempfile
 from dataclasses import replace
@@ -68,12 +67,8 @@ def run_seed(seed: int, every_min: float, work: Path) -> dict:
     fit_day, _, _ = far.day(truth_params, 2 * seed + 1, None, "ranger")
     test_day, _, test_load = far.day(truth_params, 2 * seed + 2, far.PACKS["ranger"][2], "ranger")
     fit_csv, fit_yaml = work / f"r{seed}_day1.csv", work / f"r{seed}_fit.yaml"
-    rows = np.column_stack([fit_day.relative_time_s, fit_day.voltage_v, fit_day.current_a,
-                            np.full(fit_day.time_s.size, 25.0)])
-    np.savetxt(fit_csv, rows, delimiter=",", header="time_s,voltage_V,current_A,temperature_C", comments="")
-    subprocess.run([sys.executable, "-m", "battery_predictor.cli.main", "fit", "--params",
-                    str(REPO / "params" / "ranger_mini.yaml"), "--data", str(fit_csv), "--out", str(fit_yaml)],
-                   check=True, capture_output=True, cwd=REPO)
+    far.write_day_csv(fit_day, fit_csv)
+    far.fit_with_cli(REPO / "params" / "ranger_mini.yaml", fit_csv, fit_yaml)
     core = PredictorCore(PredictorConfig(params_file=str(fit_yaml)))
     currents = load_ranger_currents()
     rng = np.random.default_rng(5000 + seed)

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 from dataclasses import replace
@@ -40,15 +39,8 @@ from battery_predictor.fitting.identifiable import pybamm_values  # noqa: E402
 from battery_predictor.io.loader import load_recording  # noqa: E402
 from battery_predictor.params import load_params  # noqa: E402
 from battery_predictor.prediction.core import LOAD_PRIOR_KEY  # noqa: E402
-from battery_predictor.recording import Recording  # noqa: E402
 
 THRESHOLD_V = 13.30
-
-
-def _write_csv(rec: Recording, path: Path, n: int | None = None) -> None:
-    n = rec.time_s.size if n is None else n
-    rows = np.column_stack([rec.relative_time_s[:n], rec.voltage_v[:n], rec.current_a[:n], np.full(n, 25.0)])
-    np.savetxt(path, rows, delimiter=",", header="time_s,voltage_V,current_A,temperature_C", comments="", fmt="%.6g")
 
 
 def run_seed(seed: int, load_prior: str, work: Path) -> dict:
@@ -62,11 +54,9 @@ def run_seed(seed: int, load_prior: str, work: Path) -> dict:
     if not below.size:
         return {"seed": seed, "skipped": f"day 2 never reaches {THRESHOLD_V} V"}
     fit_csv, test_csv, fit_yaml = work / f"s{seed}_day1.csv", work / f"s{seed}_day2.csv", work / f"fit{seed}.yaml"
-    _write_csv(fit_day, fit_csv)
-    _write_csv(test_day, test_csv, int(below[0]) + 1)
-    subprocess.run([sys.executable, "-m", "battery_predictor.cli.main", "fit", "--params",
-                    str(REPO / "params" / "temi.yaml"), "--data", str(fit_csv), "--out", str(fit_yaml)],
-                   check=True, capture_output=True, cwd=REPO)
+    far.write_day_csv(fit_day, fit_csv)
+    far.write_day_csv(test_day, test_csv, int(below[0]) + 1)
+    far.fit_with_cli(REPO / "params" / "temi.yaml", fit_csv, fit_yaml)
     fitted = load_params(fit_yaml)
     if load_prior == "power":
         operating = {k: v for k, v in fitted.operating.items() if k != LOAD_PRIOR_KEY}
