@@ -2,8 +2,9 @@
 
 The truth: every identifiable coordinate drawn uniformly (capacities +-40 %, the initial negative
 stoichiometry in 0.6-0.95, the series resistance from 0 to 3x the shipped value), simulated with
-a lumped thermal model (the fit model is isothermal), 5 s samples with 5 mV voltage noise,
-10 mV / 0.1 A quantisation. Day 1 (usage seed 2k+1) is fitted; day 2 (seed 2k+2, another usage)
+a lumped thermal model (the fit model is isothermal), recorded as the paper's instruments do
+(10 Hz samples with 5 mV / 0.05 A noise and 10 mV / 0.1 A resolution, averaged over 5 s windows;
+``--instrument 5s``: one sample every 5 s, the current's rounding undithered, as before 2026-11-28). Day 1 (usage seed 2k+1) is fitted; day 2 (seed 2k+2, another usage)
 is predicted from its own first voltage (each day starts with 60 s at rest, so that voltage is the
 open-circuit voltage) and scored: held-out RMSE, time to the robot's threshold against the first
 noisy sample below it and against the noise-free truth (a peak plus noise can cross the threshold
@@ -36,10 +37,16 @@ from pathlib import Path
 import numpy as np
 
 from battery_predictor.cli.fit_identify import simulator_named
+from battery_predictor.fitting import identification
 from battery_predictor.fitting.identifiable import default_space, pybamm_values, shipped_coordinates
-from battery_predictor.fitting.identification import COARSE_WINDOW_S, identifiability_of, identify_structures
+from battery_predictor.fitting.identification import (
+    COARSE_WINDOW_S,
+    DEFAULT_EVALUATIONS,
+    identifiability_of,
+    identify_structures,
+)
 from battery_predictor.fitting.problem import request_for_recording
-from battery_predictor.fitting.resample import as_the_monitor_sees
+from battery_predictor.fitting.resample import as_the_monitor_sees, resample_windows
 from battery_predictor.params import load_params
 from battery_predictor.profiles import load_ranger_currents, longest_route, route_profile
 from battery_predictor.profiles.load_profile import constant_current_profile
@@ -49,7 +56,15 @@ from battery_predictor.simulation import SimulationRequest, StepLoad, get_simula
 from battery_predictor.simulation.cell_setup import with_thermal
 
 REPO = Path(__file__).resolve().parents[1]
+#: Voltage sensor noise (V, one standard deviation per sample): "the noise" of the issue's twice-the-noise.
 NOISE_V = 0.005
+#: Current sensor noise at 10 Hz (A), half the 0.1 A resolution as the voltage's 5 mV is of its 10 mV.
+CURRENT_NOISE_A = 0.05
+#: The recording instruments (see :func:`day`); the paper's (10 Hz, averaged to 5 s) by default.
+INSTRUMENTS = ("paper", "5s")
+INSTRUMENT = "paper"
+#: The paper's (and the battery monitor's) averaging window, s.
+WINDOW_S = 5.0
 #: Params file, threshold key and (for the held-out day) initial OCV per cell (V) of each pack.
 PACKS = {"temi": ("temi.yaml", "runtime_cutoff_voltage_v", 4.0),
          "ranger": ("ranger_mini.yaml", "route_min_voltage_v", 3.33)}
@@ -81,25 +96,44 @@ def ranger_day_profile(seed: int):
     return profile
 
 
-def day(truth_params, seed: int, initial_ocv_v: float | None, pack: str = "temi") -> tuple[Recording, np.ndarray, StepLoad]:
-    """One usage day of the truth pack (lumped thermal), 5 s samples with sensor noise and quantisation.
+def _sensor(clean: np.ndarray, noise_sd: float, quantum: float, rng) -> np.ndarray:
+    """A reading: Gaussian noise of ``noise_sd`` on ``clean``, rounded to the instrument's ``quantum`` (same units)."""
+    return np.round((clean + rng.normal(0.0, noise_sd, clean.size)) / quantum) * quantum
 
-    Returns the recording, the noise-free pack voltage (V) at its samples and the programmed load
-    (the exact current the day drew, A, as a lab's load profile programs it).
+
+def day(truth_params, seed: int, initial_ocv_v: float | None, pack: str = "temi",
+        instrument: str = INSTRUMENT) -> tuple[Recording, np.ndarray, StepLoad]:
+    """One usage day of the truth pack (lumped thermal), as an instrument records it.
+
+    ``instrument`` (:data:`INSTRUMENTS`): ``paper`` samples at 10 Hz (5 mV / 0.05 A noise, 10 mV / 0.1 A
+    resolution) and averages over 5 s windows as the paper's data processing and the battery monitor do;
+    ``5s`` takes one sample every 5 s with the same noise on the voltage and the current rounded as
+    it is (no noise: the rounding of a steady current stays in every sample).
+
+    Returns the recording (5 s samples), the noise-free pack voltage (V) at its samples (window means
+    for ``paper``) and the programmed load (the exact current the day drew, A, as a lab's load profile
+    programs it).
     """
+    if instrument not in INSTRUMENTS:
+        raise ValueError(f"instrument must be one of {INSTRUMENTS}, got {instrument!r}")
     profile = (generate_usage_profile(seed=seed, max_duration_s=8 * 3600) if pack == "temi"
                else ranger_day_profile(seed))
     load = StepLoad.constant(0.0, 60.0).append(StepLoad.from_profile(profile).resample(5.0))
     thermal = replace(truth_params, options={**truth_params.options, "thermal": "lumped"})
-    t = np.arange(0.0, load.end_s - 5.0, 5.0)
+    dt = 0.1 if instrument == "paper" else 5.0
+    t = np.arange(0.0, load.end_s - 5.0, dt)
     req = SimulationRequest(load=load, output_time_s=t,
                             initial_pack_ocv_v=None if initial_ocv_v is None else initial_ocv_v * truth_params.series)
     res = get_simulator("fast").simulate(thermal, req)
     rng = np.random.default_rng(seed)
-    v = np.round((res.pack_voltage_v + rng.normal(0.0, NOISE_V, res.time_s.size)) / 0.01) * 0.01
-    i = np.round(load.current_at(res.time_s) / 0.1) * 0.1
+    current = load.current_at(res.time_s)
+    v = _sensor(res.pack_voltage_v, NOISE_V, 0.01, rng)
+    i = _sensor(current, CURRENT_NOISE_A if instrument == "paper" else 0.0, 0.1, rng)
     rec = Recording(res.time_s, v, i, temperature_k=np.full(res.time_s.size, 298.15), source=f"{pack}-day-{seed}")
-    return rec, res.pack_voltage_v, load
+    if instrument == "5s":
+        return rec, res.pack_voltage_v, load
+    clean = resample_windows(replace(rec, voltage_v=res.pack_voltage_v), WINDOW_S)
+    return resample_windows(rec, WINDOW_S), clean.voltage_v, load
 
 
 def write_day_csv(rec: Recording, path: Path, n: int | None = None) -> None:
@@ -127,15 +161,15 @@ def rmse_v(predicted_v: np.ndarray, measured_v: np.ndarray, n: int) -> float:
 
 def run_seed(params, seed: int, evaluations: int, resample_s: float | None, simulator: str = "fast",
              fit_thermal: str = "isothermal", pack: str = "temi", coarse_window_s: float | None = COARSE_WINDOW_S,
-             ohmic: bool = False) -> dict:
+             ohmic: bool = False, instrument: str = INSTRUMENT) -> dict:
     """Draw the truth of ``seed``, fit day 1 with ``params`` (made ``fit_thermal``), predict day 2 and score it."""
     rng = np.random.default_rng(1000 + seed)
     truth = draw_truth(params, rng)
     truth_params = params.with_values(pybamm_values(params, truth)[0])
     params = with_thermal(params, fit_thermal)
     _, threshold_key, test_ocv_v = PACKS[pack]
-    fit_day, _, _ = day(truth_params, 2 * seed + 1, None, pack)
-    test_day, test_clean_v, test_load = day(truth_params, 2 * seed + 2, test_ocv_v, pack)
+    fit_day, _, _ = day(truth_params, 2 * seed + 1, None, pack, instrument)
+    test_day, test_clean_v, test_load = day(truth_params, 2 * seed + 2, test_ocv_v, pack, instrument)
     (fit_rec,), _, _ = as_the_monitor_sees([fit_day], resample_s)
 
     def space_for(structure_params):
@@ -175,7 +209,7 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float | None, simu
     n_floor_op = min(n_floor, n_op)
     report = identifiability_of(problem, result.unit)
     return {
-        "pack": pack, "seed": seed, "fit_thermal": fit_thermal, "truth": truth, "fitted": {k: result.coordinates[k] for k in truth},
+        "pack": pack, "seed": seed, "instrument": instrument, "fit_thermal": fit_thermal, "truth": truth, "fitted": {k: result.coordinates[k] for k in truth},
         "fit_r2_mod": score.r2_mod, "fit_rmse_mv": score.rmse_mv[0], "structure": fits[0].label,
         "structures_r2_mod": {f.label: f.r2_mod for f in fits},
         "evaluations": sum(f.result.evaluations for f in fits), "fit_seconds": seconds,
@@ -195,7 +229,7 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float | None, simu
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
-    ap.add_argument("--evaluations", type=int, default=400)
+    ap.add_argument("--evaluations", type=int, default=DEFAULT_EVALUATIONS, help="identification budget (`fit`'s default)")
     ap.add_argument("--resample", type=float, default=None,
                     help="window (s) the fit day is averaged over; default: as `fit` (the 5 s samples as they are)")
     ap.add_argument("--simulator", choices=("engine", "fast"), default="engine", help="simulator of the fit (the CLI's default)")
@@ -205,11 +239,18 @@ def main() -> None:
     ap.add_argument("--coarse-window", type=float, default=COARSE_WINDOW_S,
                     help="first-stage window of the identification, s (0: one stage on the data as given)")
     ap.add_argument("--ohmic-structure", action="store_true", help="also identify the ohmic structure, as `fit --ohmic-structure`")
+    ap.add_argument("--instrument", choices=INSTRUMENTS, default=INSTRUMENT,
+                    help="how the days are recorded: the paper's 10 Hz averaged to 5 s (default), or one sample every 5 s")
+    ap.add_argument("--without-sweep", action="store_true",
+                    help="the identification before its alignment sweep (2026-11-28): no sweep; pass --evaluations 1000")
     args = ap.parse_args()
+    if args.without_sweep:
+        identification.SWEEP_FRACTION = 0.0
     params = load_params(REPO / "params" / PACKS[args.pack][0])
     for seed in args.seeds:
         print(json.dumps(run_seed(params, seed, args.evaluations, args.resample, args.simulator, args.fit_thermal,
-                                  args.pack, args.coarse_window or None, args.ohmic_structure)), flush=True)
+                                  args.pack, args.coarse_window or None, args.ohmic_structure,
+                                  args.instrument)), flush=True)
 
 
 if __name__ == "__main__":

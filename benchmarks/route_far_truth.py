@@ -1,7 +1,8 @@
 """Route answers for a Ranger pack whose truth is drawn far from the shipped params: how often wrong, which way.
 
 For each seed: the truth LiFePO4 pack and its two days of ``identification_far_truth.py`` (lumped thermal
-cells, 5 s samples with 5 mV noise, 10 mV / 0.1 A quantisation, longest routes at random payloads with
+cells, recorded as the paper's instruments do (``--instrument``: 10 Hz averaged to 5 s by default, ``5s`` as
+before 2026-11-28), longest routes at random payloads with
 standstills between them). Day 1 is fitted with ``battery-predictor fit --params params/ranger_mini.yaml``
 at its defaults. Along day 2, every ``--every`` minutes, the predictor's core (node defaults; fed day 2's
 samples so far, as the monitor's windows) is asked ``/can_accept_route`` for the longest route with a
@@ -15,7 +16,7 @@ wasted rejects, and the error of the P50 voltage after the route against the tru
 
 Run::
 
-    nice .venv/bin/python benchmarks/route_far_truth.py --seeds 60 61 [--every 20] [--json]
+    nice .venv/bin/python benchmarks/route_far_truth.py --seeds 60 61 [--every 20] [--instrument paper|5s] [--json]
 """
 
 from __future__ import annotations
@@ -59,13 +60,13 @@ def truth_after_route(truth_params, day_load: StepLoad, at_s: float, route_load:
     return float(res.pack_voltage_v[-1])
 
 
-def run_seed(seed: int, every_min: float, work: Path) -> dict:
+def run_seed(seed: int, every_min: float, work: Path, instrument: str = far.INSTRUMENT) -> dict:
     """Fit day 1 of ``seed``'s truth with the CLI, then score the route answers along day 2."""
     params = load_params(REPO / "params" / "ranger_mini.yaml")
     truth = far.draw_truth(params, np.random.default_rng(1000 + seed))
     truth_params = params.with_values(pybamm_values(params, truth)[0])
-    fit_day, _, _ = far.day(truth_params, 2 * seed + 1, None, "ranger")
-    test_day, _, test_load = far.day(truth_params, 2 * seed + 2, far.PACKS["ranger"][2], "ranger")
+    fit_day, _, _ = far.day(truth_params, 2 * seed + 1, None, "ranger", instrument)
+    test_day, _, test_load = far.day(truth_params, 2 * seed + 2, far.PACKS["ranger"][2], "ranger", instrument)
     fit_csv, fit_yaml = work / f"r{seed}_day1.csv", work / f"r{seed}_fit.yaml"
     far.write_day_csv(fit_day, fit_csv)
     far.fit_with_cli(REPO / "params" / "ranger_mini.yaml", fit_csv, fit_yaml)
@@ -107,10 +108,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", nargs="+", type=int, default=[60])
     ap.add_argument("--every", type=float, default=20.0, help="minutes between route questions along day 2")
+    ap.add_argument("--instrument", choices=far.INSTRUMENTS, default=far.INSTRUMENT)
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        rows = [run_seed(s, args.every, Path(tmp)) for s in args.seeds]
+        rows = [run_seed(s, args.every, Path(tmp), args.instrument) for s in args.seeds]
     pooled = tally([a for r in rows for a in r["answers"]])
     if args.json:
         print(json.dumps({"seeds": rows, "pooled": pooled}, indent=1, default=float))

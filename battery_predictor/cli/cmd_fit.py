@@ -24,6 +24,7 @@ from battery_predictor.cli.common import (
     print_json,
     progress_wanted,
 )
+from battery_predictor.fitting.identification import DEFAULT_EVALUATIONS
 from battery_predictor.simulation import SIMULATORS
 
 if TYPE_CHECKING:
@@ -33,8 +34,6 @@ if TYPE_CHECKING:
     from battery_predictor.fitting.space import FitParameter
     from battery_predictor.recording import Recording
 
-#: Default budget of ``--method identify`` in model evaluations.
-DEFAULT_EVALUATIONS = 1000
 
 
 def register(sub: argparse._SubParsersAction) -> None:

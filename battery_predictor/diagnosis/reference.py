@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.fitting.identification import DEFAULT_EVALUATIONS
 from battery_predictor.params import PackParams, cached_parameter_values
 from battery_predictor.recording import Recording, ends_at_cutoff
 
@@ -36,8 +37,8 @@ if TYPE_CHECKING:
     from battery_predictor.simulation.base import PackSimulator
 
 #: Default evaluation budget of the reference identification on the SPM engine (the ``fit --method
-#: identify`` default: the Panasonic 25 degC fit at 1000 evaluations takes ~24 s on the engine).
-DEFAULT_IDENTIFY_BUDGET = 1000
+#: identify`` default: the Panasonic 25 degC fit at 1000 evaluations took ~24 s on the engine).
+DEFAULT_IDENTIFY_BUDGET = DEFAULT_EVALUATIONS
 #: Budget when the engine cannot simulate the params (it falls back to the fast simulator, ~1 s per
 #: evaluation of a multi-hour recording).
 FALLBACK_BUDGET = 150

@@ -43,6 +43,8 @@ if TYPE_CHECKING:
     from battery_predictor.fitting.problem import FitProblem
     from battery_predictor.fitting.space import FitParameter
 
+#: Default budget of an identification in model evaluations.
+DEFAULT_EVALUATIONS = 1250
 #: Share of the evaluation budget spent in TPE (the rest refines).
 DEFAULT_TPE_FRACTION = 0.25
 #: Start-up (random) trials: the paper's rule per coordinate, capped at this share of the TPE trials.
@@ -65,6 +67,16 @@ FD_STEP = 2e-3
 COARSE_WINDOW_S = 30.0
 #: Share of the budget for the second stage: the refinement on the data as given.
 FINE_FRACTION = 0.25
+#: The coordinate whose optimum has several basins: aligning the negative electrode's OCP plateaus
+#: with the data's can match them one stage off (:func:`alignment_sweep`).
+SWEEP_COORDINATE = "negative_stoichiometry"
+#: Where the sweep starts, on that coordinate's unit range.
+SWEEP_STARTS = (0.1, 0.3, 0.5, 0.7, 0.9)
+#: Share of the budget for the sweep, split evenly over its starts (at the default budget each start
+#: refines for 37 evaluations: enough to fall well into its basin, not to converge).
+SWEEP_FRACTION = 0.15
+#: A sweep start within this distance (unit range) of the point swept from is in its basin already.
+SWEEP_SKIP_DISTANCE = 0.1
 
 
 class BudgetExhausted(BatteryPredictorError):
@@ -542,6 +554,54 @@ def select_by_r2_mod(problem: IdentificationProblem, ends: Sequence[tuple[float,
     return best[1], best[2]
 
 
+def alignment_sweep(problem: IdentificationProblem, log: EvaluationLog, unit: np.ndarray,
+                    evaluations: int) -> tuple[float, np.ndarray] | None:
+    """Short refinements from ``unit`` moved across the negative stoichiometry; the lowest end reached.
+
+    A refinement converges into the basin it starts in, and the negative electrode's OCP plateaus
+    give the stoichiometry several: a fit can align the data's features with the wrong plateau and
+    stay there with a cost a hundred times the truth's. Each start (:data:`SWEEP_STARTS`, except
+    those within :data:`SWEEP_SKIP_DISTANCE` of ``unit``'s own value) keeps ``unit``'s other coordinates
+    and refines for an equal share of ``evaluations``.
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+        Its space names the coordinates; without :data:`SWEEP_COORDINATE` there is nothing to sweep.
+    log : EvaluationLog
+        Counts the sweep's evaluations.
+    unit : numpy.ndarray
+        The point swept from.
+    evaluations : int
+        The sweep's budget in model evaluations.
+
+    Returns
+    -------
+    tuple of (float, numpy.ndarray) or None
+        ``(cost, unit)`` of the lowest end, or None when no start ran.
+    """
+    names = [c.name for c in problem.space]
+    if SWEEP_COORDINATE not in names:
+        return None
+    j = names.index(SWEEP_COORDINATE)
+    residual = _cost_function(problem, log)
+    total = log.count + evaluations
+    each = evaluations // len(SWEEP_STARTS)
+    ends: list[tuple[float, np.ndarray]] = []
+    for q in SWEEP_STARTS:
+        if abs(q - float(unit[j])) < SWEEP_SKIP_DISTANCE:
+            continue
+        log.budget = min(log.count + each, total)
+        if log.budget - log.count < 2:
+            break
+        start = np.array(unit, dtype=float)
+        start[j] = q
+        ends.append(_refine(residual, start, max_evaluations=each))
+    log.budget = total
+    ends = [e for e in ends if math.isfinite(e[0])]
+    return min(ends, key=lambda e: e[0]) if ends else None
+
+
 def coarsened(problem: IdentificationProblem, window_s: float = COARSE_WINDOW_S) -> IdentificationProblem | None:
     """``problem`` on its recordings averaged over ``window_s`` windows, or None when one is sampled too sparsely.
 
@@ -557,7 +617,7 @@ def coarsened(problem: IdentificationProblem, window_s: float = COARSE_WINDOW_S)
     return replace(problem, recordings=[resample_windows(r, window_s) for r in problem.recordings])
 
 
-def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: int = 0,
+def identify(problem: IdentificationProblem, *, evaluations: int = DEFAULT_EVALUATIONS, seed: int = 0,
              tpe_fraction: float = DEFAULT_TPE_FRACTION, starts: int = DEFAULT_STARTS,
              startup_per_coordinate: int = STARTUP_TRIALS_PER_COORDINATE,
              progress: Callable[[str, int, float], None] | None = None,
@@ -565,9 +625,13 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
     """Seeded TPE then multi-start trust-region least squares, within ``evaluations`` model runs.
 
     With ``coarse_window_s`` and data sampled at least three times per window, the search runs on
-    the data averaged over those windows (:func:`coarsened`) with ``1 - fine_fraction`` of the
-    budget, and its result is refined on the data as given with the rest; otherwise on the data
-    as given only. The refinement starts from the coarse result or the start point, whichever fits the
+    the data averaged over those windows (:func:`coarsened`), and its result is refined on the data
+    as given with ``fine_fraction`` of the budget; otherwise on the data
+    as given only. Between the stages an :func:`alignment_sweep` on the averaged data
+    (:data:`SWEEP_FRACTION` of the budget, when the space has the negative stoichiometry) looks for
+    a better basin of that coordinate; an end below the first stage's cost is refined on the data
+    as given too, and the better of the two by R2_mod is kept. The first stage gets the rest:
+    ``1 - fine_fraction - SWEEP_FRACTION`` (750 evaluations of the default 1250). The refinement starts from the coarse result or the start point, whichever fits the
     data as given better. When neither simulates on the data as given (a load peak the windows
     averaged away drives the model out of its range), it starts from the best of the coarse stage's
     other end points that does; when none does, the rest of the budget searches the data as given in
@@ -599,7 +663,10 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
         raise BatteryPredictorError(f"--evaluations must be >= 2, got {evaluations}")
     coarse = coarsened(problem, coarse_window_s) if coarse_window_s else None
     n_fine = int(round(fine_fraction * evaluations))
-    if coarse is None or not 0.0 < fine_fraction < 1.0 or evaluations - n_fine < 2 or n_fine < 2:
+    sweeps = any(c.name == SWEEP_COORDINATE for c in problem.space)
+    n_sweep = int(round(SWEEP_FRACTION * evaluations)) if sweeps else 0
+    n_first = evaluations - n_fine - n_sweep
+    if coarse is None or not 0.0 < fine_fraction < 1.0 or n_first < 2 or n_fine < 2:
         return _identify_one_stage(problem, evaluations=evaluations, seed=seed, tpe_fraction=tpe_fraction,
                                    starts=starts, startup_per_coordinate=startup_per_coordinate, progress=progress)
     label = f"{coarse_window_s:g} s windows: "
@@ -608,11 +675,11 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
         if progress is not None:
             progress(label + phase, count, cost)
 
-    first = _identify_one_stage(coarse, evaluations=evaluations - n_fine, seed=seed, tpe_fraction=tpe_fraction,
+    first = _identify_one_stage(coarse, evaluations=n_first, seed=seed, tpe_fraction=tpe_fraction,
                                 starts=starts, startup_per_coordinate=startup_per_coordinate,
                                 progress=coarse_progress)
     tic = time.perf_counter()
-    log = EvaluationLog(budget=n_fine)
+    log = EvaluationLog(budget=n_fine + n_sweep)
     residual = _cost_function(problem, log)
     # the refinement starts from the better, on the data as given, of the coarse result and the start point
     # (a start already at the optimum of the data as given stays there when the coarse optimum differs)
@@ -622,18 +689,34 @@ def identify(problem: IdentificationProblem, *, evaluations: int = 1000, seed: i
     if problem.failed(residual(begin)):
         running = _running_end(problem, residual, first.ends)
         begin = begin if running is None else running
-    if problem.failed(residual(begin)) and n_fine - log.count >= 2:
-        return _searched_as_given(problem, first, history, n_fine - log.count, log, seed=seed,
+    if problem.failed(residual(begin)) and n_fine + n_sweep - log.count >= 2:
+        return _searched_as_given(problem, first, history, n_fine + n_sweep - log.count, log, seed=seed,
                                   tpe_fraction=tpe_fraction, starts=starts,
                                   startup_per_coordinate=startup_per_coordinate, progress=progress, tic=tic)
-    cost, best = _refine(residual, begin, max_evaluations=n_fine)
-    history.append(("refine on the data as given", first.evaluations + log.count, cost))
+    sweep_log = EvaluationLog(budget=0)
+    swept = alignment_sweep(coarse, sweep_log, first.unit, min(n_sweep, n_fine + n_sweep - log.count))
+    # the refinement of the stage's result first: at most its share and what the sweep left
+    log.budget = n_fine + n_sweep - sweep_log.count
+    cost, best = _refine(residual, begin, max_evaluations=log.budget)
+    history.append(("refine on the data as given", first.evaluations + sweep_log.count + log.count, cost))
+    n_starts, scored = first.starts + 1, 0
+    # a sweep end below the first stage's optimum lies in a better basin: refined on the data as given as
+    # well, and the two ends scored (two evaluations kept back)
+    log.budget -= 2
+    if (swept is not None and swept[0] < first.cost
+            and log.budget - log.count >= MIN_LEFTOVER_JACOBIANS * (len(begin) + 1)):
+        other = _refine(residual, swept[1], max_evaluations=log.budget - log.count)
+        cost, best = select_by_r2_mod(problem, [(cost, best), other])
+        n_starts, scored = n_starts + 1, 2
+        history.append((f"refine the alignment sweep's end (first-stage cost {swept[0]:.4g} < {first.cost:.4g})",
+                        first.evaluations + sweep_log.count + log.count + scored, cost))
     if progress is not None:
         progress(*history[-1])
     return IdentificationResult(coordinates=problem.coordinates(best), unit=best, cost=cost,
-                                evaluations=first.evaluations + log.count, tpe_evaluations=first.tpe_evaluations,
-                                starts=first.starts + 1, seconds=first.seconds + time.perf_counter() - tic,
-                                history=history, model_seconds=first.model_seconds + log.model_seconds)
+                                evaluations=first.evaluations + sweep_log.count + log.count + scored,
+                                tpe_evaluations=first.tpe_evaluations, starts=n_starts,
+                                seconds=first.seconds + time.perf_counter() - tic, history=history,
+                                model_seconds=first.model_seconds + sweep_log.model_seconds + log.model_seconds)
 
 
 def _running_end(problem: IdentificationProblem, residual: Callable[[np.ndarray], np.ndarray],

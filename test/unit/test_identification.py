@@ -552,3 +552,63 @@ def test_extra_refinements_keep_the_budget_including_the_scoring_of_every_end_po
         assert _Quadratic.runs == result.evaluations <= budget
         np.testing.assert_allclose(result.unit, target, atol=1e-4)
     assert extra, "the quick problem must leave budget for further refinements"
+
+
+class _TwoBasins(_Quadratic):
+    """The negative stoichiometry with a shallow basin at 0.25 (cost 0.01) and the deep one at 0.85 (cost 0),
+    as the OCP plateaus give it; a second coordinate with its minimum at 0.5."""
+
+    space = [_UnitCoordinate("negative_stoichiometry"), _UnitCoordinate("b")]
+
+    def __init__(self):
+        super().__init__([0.85, 0.5])
+
+    def unit(self, coordinates):
+        return np.array([coordinates["negative_stoichiometry"], coordinates["b"]])
+
+    def coordinates(self, unit):
+        return {"negative_stoichiometry": float(unit[0]), "b": float(unit[1])}
+
+    def _residual(self, coordinates):
+        s, b = self.unit(coordinates)
+        shallow = 0.1 / (1.0 + math.exp(30.0 * (s - 0.55)))
+        return np.array([4.0 * (s - 0.25) * (s - 0.85), shallow, b - 0.5])
+
+
+def test_the_alignment_sweep_finds_the_deeper_stoichiometry_basin_within_its_budget():
+    from battery_predictor.fitting.identification import EvaluationLog, _refine, alignment_sweep
+
+    problem = _TwoBasins()
+    log = EvaluationLog(budget=10_000)
+    local_cost, local = _refine(_cost_function_of(problem, log), np.array([0.3, 0.3]), max_evaluations=200)
+    assert local[0] == pytest.approx(0.25, abs=0.02) and local_cost > 0.005  # a refinement stays in its basin
+    log = EvaluationLog(budget=0)
+    cost, unit = alignment_sweep(problem, log, local, evaluations=60)
+    assert log.count <= 60
+    assert unit[0] == pytest.approx(0.85, abs=0.05) and cost < 0.1 * local_cost
+
+
+def test_there_is_no_sweep_without_a_negative_stoichiometry_coordinate():
+    from battery_predictor.fitting.identification import EvaluationLog, alignment_sweep
+
+    log = EvaluationLog(budget=0)
+    assert alignment_sweep(_Quadratic([0.3, 0.7]), log, np.array([0.5, 0.5]), evaluations=60) is None
+    assert log.count == 0
+
+
+def test_identify_leaves_a_wrong_stoichiometry_basin_through_the_sweep_within_its_budget(monkeypatch):
+    problem = _TwoBasins()
+    problem.space = [dataclasses.replace(c, initial=0.3) for c in _TwoBasins.space]
+    monkeypatch.setattr("battery_predictor.fitting.identification.coarsened", lambda p, window_s: p)
+    _Quadratic.runs = 0
+    # no TPE: the first stage refines from the start, in the shallow basin
+    result = identify(problem, evaluations=200, seed=0, tpe_fraction=0.0, starts=1)
+    assert _Quadratic.runs == result.evaluations <= 200
+    assert result.unit[0] == pytest.approx(0.85, abs=1e-3) and result.unit[1] == pytest.approx(0.5, abs=1e-3)
+    assert any("alignment sweep" in phase for phase, _, _ in result.history)
+
+
+def _cost_function_of(problem, log):
+    from battery_predictor.fitting.identification import _cost_function
+
+    return _cost_function(problem, log)
