@@ -9,6 +9,9 @@ and scored as ``evaluate-runtime`` scores a recording: the predictor's core at i
 windows, nine checkpoints (10 % .. 90 % of the discharge). A day 2 that never reaches 13.30 V is skipped and
 said so.
 
+Beside the predictor: a Coulomb counter told the charge day 2 actually delivers to 13.30 V (an oracle:
+remaining Ah / mean current so far), so that what remains of its error is the forecast of the load.
+
 ``--load-prior power`` removes the fitted params' ``operating.load_prior_power_fraction`` before scoring:
 the predictor's ``load_model auto`` then assumes a constant power until the day's windows decide, as
 before 2026-11-28.
@@ -36,13 +39,19 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 
 import identification_far_truth as far  # noqa: E402
 
-from battery_predictor.evaluation.runtime_eval import error_summary, evaluate_recording  # noqa: E402
+from battery_predictor.evaluation.runtime_eval import (  # noqa: E402
+    charge_to_end_ah,
+    error_summary,
+    evaluate_recording,
+)
 from battery_predictor.fitting.identifiable import pybamm_values  # noqa: E402
 from battery_predictor.io.loader import load_recording  # noqa: E402
 from battery_predictor.params import load_params  # noqa: E402
 from battery_predictor.prediction.core import LOAD_PRIOR_KEY  # noqa: E402
 
 THRESHOLD_V = 13.30
+#: The counter told the charge day 2 delivers to the threshold: remaining Ah / mean current so far.
+ORACLE = "counter, true charge to the end"
 
 
 def run_seed(seed: int, load_prior: str, work: Path, instrument: str = far.INSTRUMENT) -> dict:
@@ -63,13 +72,17 @@ def run_seed(seed: int, load_prior: str, work: Path, instrument: str = far.INSTR
     if load_prior == "power":
         operating = {k: v for k, v in fitted.operating.items() if k != LOAD_PRIOR_KEY}
         fitted = replace(fitted, operating=operating)
-    result = evaluate_recording(fitted, load_recording(test_csv), cutoff_v=THRESHOLD_V, capacities_ah={})
+    test_rec = load_recording(test_csv)
+    # the counter told the charge the day will actually deliver (an oracle): what remains is its load forecast
+    oracle_ah = charge_to_end_ah(fitted, test_rec, THRESHOLD_V)
+    result = evaluate_recording(fitted, test_rec, cutoff_v=THRESHOLD_V, capacities_ah={ORACLE: oracle_ah})
     errors = [(c.predicted_s, c.true_remaining_s) for c in result.checkpoints]
     late = [(c.predicted_s, c.true_remaining_s) for c in result.checkpoints if c.fraction >= 0.3 - 1e-9]
     over_half = sum(1 for p, t in late if not abs(p - t) <= 0.5 * t)
+    counter = [(c.counters_s[ORACLE], c.true_remaining_s) for c in result.checkpoints]
     return {"seed": seed, "errors_min": [round((p - t) / 60.0, 1) for p, t in errors],
             "summary": error_summary(errors, late_fraction_pairs=late), "off_by_half_after_30pct": over_half,
-            "answers_after_30pct": len(late)}
+            "answers_after_30pct": len(late), "oracle_counter_errors_min": [round((p - t) / 60.0, 1) for p, t in counter]}
 
 
 def main() -> None:
@@ -83,9 +96,12 @@ def main() -> None:
         rows = [run_seed(s, args.load_prior, Path(tmp), args.instrument) for s in args.seeds]
     scored = [r for r in rows if "summary" in r]
     pooled = [abs(e) for r in scored for e in r["errors_min"]]
+    pooled_counter = [abs(e) for r in scored for e in r["oracle_counter_errors_min"]]
     if args.json:
         print(json.dumps({"load_prior": args.load_prior, "seeds": rows,
-                          "pooled_mae_min": float(np.mean(pooled)) if pooled else None}, indent=1, default=float))
+                          "pooled_mae_min": float(np.mean(pooled)) if pooled else None,
+                          "pooled_oracle_counter_mae_min": float(np.mean(pooled_counter)) if pooled else None},
+                         indent=1, default=float))
         return
     for r in rows:
         if "skipped" in r:
@@ -93,12 +109,14 @@ def main() -> None:
         else:
             s = r["summary"]
             print(f"seed {r['seed']}: MAE {s['mae_min']:.1f} min, bias {s['bias_min']:+.1f} min; errors "
-                  + " ".join(f"{e:+.1f}" for e in r["errors_min"]))
+                  + " ".join(f"{e:+.1f}" for e in r["errors_min"]) + "; oracle counter "
+                  + " ".join(f"{e:+.1f}" for e in r["oracle_counter_errors_min"]))
     if pooled:
         off = sum(r["off_by_half_after_30pct"] for r in scored)
         after = sum(r["answers_after_30pct"] for r in scored)
         print(f"pooled over {len(scored)} days ({len(pooled)} answers), load prior {args.load_prior}: "
-              f"MAE {np.mean(pooled):.1f} min, off by more than half after 30 %: {off} of {after}")
+              f"MAE {np.mean(pooled):.1f} min, off by more than half after 30 %: {off} of {after}; "
+              f"{ORACLE}: MAE {np.mean(pooled_counter):.1f} min")
 
 
 if __name__ == "__main__":
