@@ -695,10 +695,18 @@ def identify(problem: IdentificationProblem, *, evaluations: int = DEFAULT_EVALU
                                   startup_per_coordinate=startup_per_coordinate, progress=progress, tic=tic)
     sweep_log = EvaluationLog(budget=0)
     swept = alignment_sweep(coarse, sweep_log, first.unit, min(n_sweep, n_fine + n_sweep - log.count))
+
+    def note(phase: str, count: int, cost: float) -> None:
+        history.append((phase, count, cost))
+        if progress is not None:
+            progress(phase, count, cost)
+
+    if swept is not None:
+        note(label + f"alignment sweep (reached {swept[0]:.4g})", first.evaluations + sweep_log.count, first.cost)
     # the refinement of the stage's result first: at most its share and what the sweep left
     log.budget = n_fine + n_sweep - sweep_log.count
     cost, best = _refine(residual, begin, max_evaluations=log.budget)
-    history.append(("refine on the data as given", first.evaluations + sweep_log.count + log.count, cost))
+    note("refine on the data as given", first.evaluations + sweep_log.count + log.count, cost)
     n_starts, scored = first.starts + 1, 0
     # a sweep end below the first stage's optimum lies in a better basin: refined on the data as given as
     # well, and the two ends scored (two evaluations kept back)
@@ -708,10 +716,8 @@ def identify(problem: IdentificationProblem, *, evaluations: int = DEFAULT_EVALU
         other = _refine(residual, swept[1], max_evaluations=log.budget - log.count)
         cost, best = select_by_r2_mod(problem, [(cost, best), other])
         n_starts, scored = n_starts + 1, 2
-        history.append((f"refine the alignment sweep's end (first-stage cost {swept[0]:.4g} < {first.cost:.4g})",
-                        first.evaluations + sweep_log.count + log.count + scored, cost))
-    if progress is not None:
-        progress(*history[-1])
+        note(f"refine the alignment sweep's end (first-stage cost {swept[0]:.4g} < {first.cost:.4g})",
+             first.evaluations + sweep_log.count + log.count + scored, cost)
     return IdentificationResult(coordinates=problem.coordinates(best), unit=best, cost=cost,
                                 evaluations=first.evaluations + sweep_log.count + log.count + scored,
                                 tpe_evaluations=first.tpe_evaluations, starts=n_starts,
