@@ -161,7 +161,7 @@ def rmse_v(predicted_v: np.ndarray, measured_v: np.ndarray, n: int) -> float:
 
 def run_seed(params, seed: int, evaluations: int, resample_s: float | None, simulator: str = "fast",
              fit_thermal: str = "isothermal", pack: str = "temi", coarse_window_s: float | None = COARSE_WINDOW_S,
-             ohmic: bool = False, instrument: str = INSTRUMENT) -> dict:
+             ohmic: bool = False, instrument: str = INSTRUMENT, tpe_seed: int | None = None) -> dict:
     """Draw the truth of ``seed``, fit day 1 with ``params`` (made ``fit_thermal``), predict day 2 and score it."""
     rng = np.random.default_rng(1000 + seed)
     truth = draw_truth(params, rng)
@@ -180,7 +180,8 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float | None, simu
     tic = time.perf_counter()
     # as `fit` does: the params' structure and, with `ohmic`, the ohmic one where the day has current steps
     fits = identify_structures(params, [fit_rec], simulator_named(simulator), space_for, ohmic=ohmic,
-                               evaluations=evaluations, seed=seed, coarse_window_s=coarse_window_s)
+                               evaluations=evaluations, seed=seed if tpe_seed is None else tpe_seed,
+                               coarse_window_s=coarse_window_s)
     seconds = time.perf_counter() - tic
     problem, result = fits[0].problem, fits[0].result
     score = problem.score(result.coordinates)
@@ -209,7 +210,8 @@ def run_seed(params, seed: int, evaluations: int, resample_s: float | None, simu
     n_floor_op = min(n_floor, n_op)
     report = identifiability_of(problem, result.unit)
     return {
-        "pack": pack, "seed": seed, "instrument": instrument, "fit_thermal": fit_thermal, "truth": truth, "fitted": {k: result.coordinates[k] for k in truth},
+        "pack": pack, "seed": seed, "tpe_seed": seed if tpe_seed is None else tpe_seed, "instrument": instrument,
+        "fit_thermal": fit_thermal, "truth": truth, "fitted": {k: result.coordinates[k] for k in truth},
         "fit_r2_mod": score.r2_mod, "fit_rmse_mv": score.rmse_mv[0], "structure": fits[0].label,
         "structures_r2_mod": {f.label: f.r2_mod for f in fits},
         "evaluations": sum(f.result.evaluations for f in fits), "fit_seconds": seconds,
@@ -241,6 +243,8 @@ def main() -> None:
     ap.add_argument("--ohmic-structure", action="store_true", help="also identify the ohmic structure, as `fit --ohmic-structure`")
     ap.add_argument("--instrument", choices=INSTRUMENTS, default=INSTRUMENT,
                     help="how the days are recorded: the paper's 10 Hz averaged to 5 s (default), or one sample every 5 s")
+    ap.add_argument("--tpe-seed", type=int, default=None,
+                    help="TPE seed of the fit (default: the draw's seed; `fit` itself uses 0)")
     ap.add_argument("--without-sweep", action="store_true",
                     help="the identification before its alignment sweep (2026-11-28): no sweep; pass --evaluations 1000")
     args = ap.parse_args()
@@ -250,7 +254,7 @@ def main() -> None:
     for seed in args.seeds:
         print(json.dumps(run_seed(params, seed, args.evaluations, args.resample, args.simulator, args.fit_thermal,
                                   args.pack, args.coarse_window or None, args.ohmic_structure,
-                                  args.instrument)), flush=True)
+                                  args.instrument, args.tpe_seed)), flush=True)
 
 
 if __name__ == "__main__":
