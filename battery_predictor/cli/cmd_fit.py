@@ -35,7 +35,6 @@ if TYPE_CHECKING:
     from battery_predictor.recording import Recording
 
 
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="fit a pack model to measured data (identifiable coordinates, or the paper's TPE)")
     p.add_argument("--params", required=True, help="params YAML to start from")

@@ -626,8 +626,7 @@ def identify(problem: IdentificationProblem, *, evaluations: int = DEFAULT_EVALU
 
     With ``coarse_window_s`` and data sampled at least three times per window, the search runs on
     the data averaged over those windows (:func:`coarsened`), and its result is refined on the data
-    as given with ``fine_fraction`` of the budget; otherwise on the data
-    as given only. Between the stages an :func:`alignment_sweep` on the averaged data
+    as given with ``fine_fraction`` of the budget; otherwise on the data as given only. Between the stages an :func:`alignment_sweep` on the averaged data
     (:data:`SWEEP_FRACTION` of the budget, when the space has the negative stoichiometry) looks for
     a better basin of that coordinate; an end below the first stage's cost is refined on the data
     as given too, and the better of the two by R2_mod is kept. The first stage gets the rest:
