@@ -16,7 +16,8 @@ wasted rejects, and the error of the P50 voltage after the route against the tru
 
 Run::
 
-    nice .venv/bin/python benchmarks/route_far_truth.py --seeds 60 61 [--every 20] [--instrument paper|5s] [--json]
+    nice .venv/bin/python benchmarks/route_far_truth.py --seeds 60 61 [--every 20] [--instrument paper|5s]
+        [--drift-correction full|smallest] [--work DIR] [--json]
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ import identification_far_truth as far  # noqa: E402
 
 from battery_predictor.fitting.identifiable import pybamm_values  # noqa: E402
 from battery_predictor.params import load_params  # noqa: E402
-from battery_predictor.prediction.core import PredictorConfig, PredictorCore  # noqa: E402
+from battery_predictor.prediction.core import DRIFT_CORRECTIONS, PredictorConfig, PredictorCore  # noqa: E402
 from battery_predictor.profiles import load_ranger_currents, longest_route, route_profile  # noqa: E402
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator  # noqa: E402
 
@@ -60,7 +61,8 @@ def truth_after_route(truth_params, day_load: StepLoad, at_s: float, route_load:
     return float(res.pack_voltage_v[-1])
 
 
-def run_seed(seed: int, every_min: float, work: Path, instrument: str = far.INSTRUMENT) -> dict:
+def run_seed(seed: int, every_min: float, work: Path, instrument: str = far.INSTRUMENT,
+             drift_correction: str = "full") -> dict:
     """Fit day 1 of ``seed``'s truth with the CLI, then score the route answers along day 2."""
     params = load_params(REPO / "params" / "ranger_mini.yaml")
     truth = far.draw_truth(params, np.random.default_rng(1000 + seed))
@@ -68,9 +70,10 @@ def run_seed(seed: int, every_min: float, work: Path, instrument: str = far.INST
     fit_day, _, _ = far.day(truth_params, 2 * seed + 1, None, "ranger", instrument)
     test_day, _, test_load = far.day(truth_params, 2 * seed + 2, far.PACKS["ranger"][2], "ranger", instrument)
     fit_csv, fit_yaml = work / f"r{seed}_day1.csv", work / f"r{seed}_fit.yaml"
-    far.write_day_csv(fit_day, fit_csv)
-    far.fit_with_cli(REPO / "params" / "ranger_mini.yaml", fit_csv, fit_yaml)
-    core = PredictorCore(PredictorConfig(params_file=str(fit_yaml)))
+    if not fit_yaml.exists():  # a kept fit (--work) is the same day's: ask it again, do not fit again
+        far.write_day_csv(fit_day, fit_csv)
+        far.fit_with_cli(REPO / "params" / "ranger_mini.yaml", fit_csv, fit_yaml)
+    core = PredictorCore(PredictorConfig(params_file=str(fit_yaml), drift_correction=drift_correction))
     currents = load_ranger_currents()
     rng = np.random.default_rng(5000 + seed)
     t, v, i = test_day.relative_time_s, test_day.voltage_v, test_day.current_a
@@ -109,10 +112,16 @@ def main() -> None:
     ap.add_argument("--seeds", nargs="+", type=int, default=[60])
     ap.add_argument("--every", type=float, default=20.0, help="minutes between route questions along day 2")
     ap.add_argument("--instrument", choices=far.INSTRUMENTS, default=far.INSTRUMENT)
+    ap.add_argument("--drift-correction", choices=DRIFT_CORRECTIONS, default="full",
+                    help="the predictor's drift_correction (node parameter; default: the node's default)")
+    ap.add_argument("--work", type=Path, default=None,
+                    help="keep the days and fits here and reuse a kept fit (ask one fit several ways)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        rows = [run_seed(s, args.every, Path(tmp), args.instrument) for s in args.seeds]
+        work = args.work or Path(tmp)
+        work.mkdir(parents=True, exist_ok=True)
+        rows = [run_seed(s, args.every, work, args.instrument, args.drift_correction) for s in args.seeds]
     pooled = tally([a for r in rows for a in r["answers"]])
     if args.json:
         print(json.dumps({"seeds": rows, "pooled": pooled}, indent=1, default=float))

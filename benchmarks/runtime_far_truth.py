@@ -19,7 +19,7 @@ before 2026-11-28.
 Run::
 
     nice .venv/bin/python benchmarks/runtime_far_truth.py --seeds 60 61 62 [--load-prior params|power]
-        [--instrument paper|5s] [--json]
+        [--instrument paper|5s] [--drift-correction full|smallest] [--end-event peak|sampled] [--work DIR] [--json]
 """
 
 from __future__ import annotations
@@ -47,14 +47,15 @@ from battery_predictor.evaluation.runtime_eval import (  # noqa: E402
 from battery_predictor.fitting.identifiable import pybamm_values  # noqa: E402
 from battery_predictor.io.loader import load_recording  # noqa: E402
 from battery_predictor.params import load_params  # noqa: E402
-from battery_predictor.prediction.core import LOAD_PRIOR_KEY  # noqa: E402
+from battery_predictor.prediction.core import DRIFT_CORRECTIONS, END_EVENTS, LOAD_PRIOR_KEY, PredictorConfig  # noqa: E402
 
 THRESHOLD_V = 13.30
 #: The counter told the charge day 2 delivers to the threshold: remaining Ah / mean current so far.
 ORACLE = "counter, true charge to the end"
 
 
-def run_seed(seed: int, load_prior: str, work: Path, instrument: str = far.INSTRUMENT) -> dict:
+def run_seed(seed: int, load_prior: str, work: Path, instrument: str = far.INSTRUMENT,
+             drift_correction: str = "full", end_event: str = "peak") -> dict:
     """Draw the truth of ``seed``, fit its day 1 with the CLI, score the predictor on its day 2."""
     params = load_params(REPO / "params" / "temi.yaml")
     truth = far.draw_truth(params, np.random.default_rng(1000 + seed))
@@ -65,9 +66,10 @@ def run_seed(seed: int, load_prior: str, work: Path, instrument: str = far.INSTR
     if not below.size:
         return {"seed": seed, "skipped": f"day 2 never reaches {THRESHOLD_V} V"}
     fit_csv, test_csv, fit_yaml = work / f"s{seed}_day1.csv", work / f"s{seed}_day2.csv", work / f"fit{seed}.yaml"
-    far.write_day_csv(fit_day, fit_csv)
     far.write_day_csv(test_day, test_csv, int(below[0]) + 1)
-    far.fit_with_cli(REPO / "params" / "temi.yaml", fit_csv, fit_yaml)
+    if not fit_yaml.exists():  # a kept fit (--work) is the same day's: score it again, do not fit again
+        far.write_day_csv(fit_day, fit_csv)
+        far.fit_with_cli(REPO / "params" / "temi.yaml", fit_csv, fit_yaml)
     fitted = load_params(fit_yaml)
     if load_prior == "power":
         operating = {k: v for k, v in fitted.operating.items() if k != LOAD_PRIOR_KEY}
@@ -75,7 +77,9 @@ def run_seed(seed: int, load_prior: str, work: Path, instrument: str = far.INSTR
     test_rec = load_recording(test_csv)
     # the counter told the charge the day will actually deliver (an oracle): what remains is its load forecast
     oracle_ah = charge_to_end_ah(fitted, test_rec, THRESHOLD_V)
-    result = evaluate_recording(fitted, test_rec, cutoff_v=THRESHOLD_V, capacities_ah={ORACLE: oracle_ah})
+    config = PredictorConfig(params_file=str(fit_yaml), cutoff_voltage_v=THRESHOLD_V, drift_correction=drift_correction,
+                             end_event=end_event)
+    result = evaluate_recording(fitted, test_rec, cutoff_v=THRESHOLD_V, capacities_ah={ORACLE: oracle_ah}, config=config)
     errors = [(c.predicted_s, c.true_remaining_s) for c in result.checkpoints]
     late = [(c.predicted_s, c.true_remaining_s) for c in result.checkpoints if c.fraction >= 0.3 - 1e-9]
     over_half = sum(1 for p, t in late if not abs(p - t) <= 0.5 * t)
@@ -90,10 +94,19 @@ def main() -> None:
     ap.add_argument("--seeds", nargs="+", type=int, default=[60])
     ap.add_argument("--load-prior", choices=("params", "power"), default="params")
     ap.add_argument("--instrument", choices=far.INSTRUMENTS, default=far.INSTRUMENT)
+    ap.add_argument("--drift-correction", choices=DRIFT_CORRECTIONS, default="full",
+                    help="the predictor's drift_correction (node parameter; default: the node's default)")
+    ap.add_argument("--end-event", choices=END_EVENTS, default="peak",
+                    help="the predictor's end_event (node parameter; default: the node's default)")
+    ap.add_argument("--work", type=Path, default=None,
+                    help="keep the days and fits here and reuse a kept fit (score one fit several ways)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        rows = [run_seed(s, args.load_prior, Path(tmp), args.instrument) for s in args.seeds]
+        work = args.work or Path(tmp)
+        work.mkdir(parents=True, exist_ok=True)
+        rows = [run_seed(s, args.load_prior, work, args.instrument, args.drift_correction, args.end_event)
+                for s in args.seeds]
     scored = [r for r in rows if "summary" in r]
     pooled = [abs(e) for r in scored for e in r["errors_min"]]
     pooled_counter = [abs(e) for r in scored for e in r["oracle_counter_errors_min"]]

@@ -54,6 +54,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--drift-correction", choices=("full", "smallest"), default=None,
                    help="where a carried state that left the state tolerance goes (default: the predictor's, full; "
                         "see the node parameter drift_correction)")
+    p.add_argument("--end-event", choices=("peak", "sampled"), default=None,
+                   help="where a load with peaks ends: where a quantile peak drawn at any moment crosses (peak), or "
+                        "the median end of futures resampled from the cycle's windows (sampled) (default: the "
+                        "predictor's, peak; see the node parameter end_event)")
     p.add_argument("--thermal-forecast", choices=("auto", "held"), default=None,
                    help="the cell temperature ahead: integrated by the params' lumped thermal cell when they carry one "
                         "(auto), or held at the latest measurement (default: the predictor's, auto; see the node "
@@ -127,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
     options = {"peak_source": args.peak_source, "load_model": args.load_model,
                "load_estimator": args.load_estimator, "load_time_constant_s": args.load_time_constant_s,
                "drift_correction": args.drift_correction, "thermal_forecast": args.thermal_forecast,
-               "ambient_temperature_k": args.ambient_k}
+               "ambient_temperature_k": args.ambient_k, "end_event": args.end_event}
     config = PredictorConfig(params_file=str(params.source), cutoff_voltage_v=cutoff_v,
                              **{k: v for k, v in options.items() if v})
     recordings = [load(path) for path in args.data]  # every input is checked before minutes of evaluation
@@ -146,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     summary.update({"params": str(params.source), "cutoff_v": cutoff_v, "peak_source": config.peak_source,
                     "load_model": config.load_model, "load_estimator": config.load_estimator,
                     "load_time_constant_s": config.load_time_constant_s, "drift_correction": config.drift_correction,
-                    "thermal_forecast": config.thermal_forecast, "ambient_temperature_k": config.ambient_temperature_k,
+                    "end_event": config.end_event, "thermal_forecast": config.thermal_forecast, "ambient_temperature_k": config.ambient_temperature_k,
                     "capacities_ah": capacities,
                     "checkpoints": list(checkpoints), "seconds": time.perf_counter() - tic})
     if out_dir is not None:

@@ -65,6 +65,7 @@ from battery_predictor.nodes.messages import (
 from battery_predictor.params_checks import check_node_voltages
 from battery_predictor.prediction.core import (
     DRIFT_CORRECTIONS,
+    END_EVENTS,
     LOAD_MODELS,
     PEAK_SOURCES,
     STATUS_MODEL_FAILED,
@@ -281,6 +282,11 @@ class PredictorNode(Node):
                 "A carried state more than state_tolerance_v_per_cell off the measurement is recalibrated onto "
                 "it ('full') or just inside the tolerance, half of it left on the side it left ('smallest'; "
                 "for flat-OCV cells such as LiFePO4).", DRIFT_CORRECTIONS),
+            end_event=declare_str(
+                self, "end_event", PredictorConfig.end_event,
+                "Where the runtime of a load with peaks ends: where a peak at peak_current_quantile drawn at any moment "
+                "reaches the cut-off ('peak'), or the median end of futures resampled in 10 min blocks from the "
+                "cycle's own windows ('sampled').", END_EVENTS),
             thermal_forecast=declare_str(
                 self, "thermal_forecast", PredictorConfig.thermal_forecast,
                 "The cell temperature ahead of the runtime forecast: 'auto' integrates it from the latest measured "

@@ -26,7 +26,7 @@ from battery_predictor.prediction.load_estimate import LoadEstimator, LoadKind
 from battery_predictor.prediction.pack_model import PackModel, pack_model
 from battery_predictor.prediction.priority import RoutePriority, YieldingRunner
 from battery_predictor.prediction.route import RouteDecision, rejected
-from battery_predictor.prediction.runtime import RuntimePrediction, predict_remaining_runtime
+from battery_predictor.prediction.runtime import RuntimePrediction, predict_remaining_runtime, sampled_fraction_of
 from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v, unexplained_jump_v
 from battery_predictor.prediction.temperature import (
     THERMAL_FORECASTS,
@@ -141,6 +141,13 @@ class PredictorConfig:
         Where the OCV is flat (LiFePO4's plateau) a voltage the model misses by the tolerance is a large part
         of the charge. Measured (docs/runtime_real_data/other_cells.md): the fit recordings of three cells
         tie (pooled MAE 3.65 full / 3.72 smallest min); held out, K2 LiFePO4 7.5 -> 3.8 min, LG M50 6.9 -> 7.1.
+    end_event : str
+        Where the runtime of a load with peaks ends: ``"peak"`` (default) where a peak at
+        ``peak_current_quantile`` drawn at any moment would reach the cut-off; ``"sampled"`` at the median end of
+        futures resampled in 10 min blocks from the cycle's own windows (:func:`.runtime.sampled_end_s`), the
+        first load state heavy enough at that charge. The futures run at most every :data:`SAMPLED_REFRESH_S` of
+        pack-state time; in between an answer keeps the last one's place between the peak-load and the
+        average-load crossings.
     thermal_forecast : str
         ``"auto"`` (default): when the params carry a lumped thermal cell that the engine runs, the runtime
         forecast starts the cells at the latest measured temperature and integrates it with that cell's heat
@@ -179,6 +186,7 @@ class PredictorConfig:
     simulator: str = "auto"
     decision_risk: float = 0.1
     drift_correction: str = "full"
+    end_event: str = "peak"
     thermal_forecast: str = "auto"
     ambient_temperature_k: float = math.nan
 
@@ -187,6 +195,12 @@ class PredictorConfig:
 LOAD_MODELS = ("auto", "power", "current")
 #: Where a carried state that left the tolerance band goes (``PredictorConfig.drift_correction``).
 DRIFT_CORRECTIONS = ("full", "smallest")
+#: Where the runtime of a load with peaks ends (``PredictorConfig.end_event``).
+END_EVENTS = ("peak", "sampled")
+#: How long (s of pack-state time) a ``"sampled"`` answer's place between the peak-load and the average-load
+#: crossings is reused before its futures are run again (the cycle's load statistics change slowly; the futures
+#: take about a second).
+SAMPLED_REFRESH_S = 900.0
 #: Exponent of the ``"auto"`` load model while the cycle's data cannot tell current from power, unless the
 #: params say otherwise (:data:`LOAD_PRIOR_KEY`): a constant power errs early, never late, on a current load.
 AUTO_LOAD_PRIOR = 1.0
@@ -252,6 +266,10 @@ class PredictorCore:
         if config.drift_correction not in DRIFT_CORRECTIONS:
             raise ValueError(f"drift_correction {config.drift_correction!r} is not one of "
                              f"{', '.join(DRIFT_CORRECTIONS)}")
+        if config.end_event not in END_EVENTS:
+            raise ValueError(f"end_event {config.end_event!r} is not one of {', '.join(END_EVENTS)}")
+        #: (pack-state stamp s, discharge cycles ended, place between the crossings) of the last sampled futures
+        self._sampled: tuple[float, int, float] | None = None
         if config.thermal_forecast not in THERMAL_FORECASTS:
             raise ValueError(f"thermal_forecast {config.thermal_forecast!r} is not one of {', '.join(THERMAL_FORECASTS)}")
         #: Lowest cell temperature measured since the present discharge cycle began (the ambient estimate).
@@ -365,6 +383,7 @@ class PredictorCore:
         self._recalibrate_reason = why
         self.events.append((stamp_s, why))
         self._ambient.reset()
+        self._sampled = None  # a new pack: its sampled answer is placed afresh
 
     def latest_state(self) -> tuple[float, float, float, float] | None:
         """(stamp_s, voltage_v, current_a, temperature_k) of the latest state, or None."""
@@ -558,6 +577,13 @@ class PredictorCore:
             peak = self._load.quantile_a(self.config.peak_current_quantile,
                                          of_peaks=self.config.peak_source == "sample")
             kind = self._load_kind(r_ohm)
+            history_a = np.fromiter(self._load.currents, float) if self.config.end_event == "sampled" else None
+            stamps = np.fromiter(self._load.stamps, float) if history_a is not None else np.empty(0)
+            cycle = self._load.sessions_ended
+            reused = self._sampled
+        fraction = (reused[2] if reused is not None and reused[1] == cycle and 0.0 <= stamp - reused[0] < SAMPLED_REFRESH_S
+                    else None)
+        window_s = float(np.median(np.diff(stamps))) if stamps.size > 1 else 5.0
         if v <= cutoff:
             return _invalid_runtime(stamp, cutoff, STATUS_BELOW_CUTOFF,
                                     f"pack voltage {v:.2f} V is at or below the cut-off {cutoff:.2f} V",
@@ -583,9 +609,16 @@ class PredictorCore:
                                              calibration=cal,
                                              peak_current_a=peak if math.isfinite(peak) else None,
                                              peak_duration_s=self._peak_duration_s(), average_power_w=power,
-                                             load_exponent=kind.exponent)
+                                             load_exponent=kind.exponent, end_event=self.config.end_event,
+                                             load_history_a=history_a,
+                                             history_window_s=min(max(window_s, 0.1), 60.0),
+                                             sampled_fraction=fraction)
         except BatteryPredictorError as exc:
             return _invalid_runtime(stamp, cutoff, STATUS_MODEL_FAILED, f"model failed: {exc}", temperature_k=temp)
+        placed = sampled_fraction_of(pred) if fraction is None else None
+        if placed is not None:
+            with self._lock:
+                self._sampled = (stamp, cycle, placed)
         soc, soc_note = published_soc(pred.calibration.soc)
         notes = [n for n in (soc_note, f"calibration {pred.calibration.clipped}" if pred.calibration.clipped else "")
                  if n]
@@ -595,7 +628,8 @@ class PredictorCore:
         spread = self._runtime_spread(pred, LoadAhead(avg, mean_power, kind.exponent if power else 0.0, math.nan,
                                                       undecided), v)
         note = "; " + "; ".join(notes) if notes else ""
-        peaks = f" with {peak:.2f} A peaks" if pred.limited_by == "peak_cutoff" else ""
+        peaks = (f" with {peak:.2f} A peaks" if pred.limited_by == "peak_cutoff"
+                 else " with the cycle's load resampled" if pred.limited_by == "sampled_cutoff" else "")
         load_text = _load_text(avg, power, kind, pred.assumed_current_a)
         if pred.limited_by == "horizon":
             return RuntimeStatus(stamp, pred.remaining_s, avg, temp, soc, cutoff, False, STATUS_BEYOND_HORIZON,

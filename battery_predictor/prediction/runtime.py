@@ -45,7 +45,8 @@ class RuntimePrediction:
     cutoff_voltage_v : float
         Pack voltage threshold in V.
     limited_by : str
-        ``"pack_cutoff"`` (average load), ``"peak_cutoff"`` (a load peak), ``"cell_cutoff"`` or ``"horizon"``.
+        ``"pack_cutoff"`` (average load), ``"peak_cutoff"`` (a load peak), ``"sampled_cutoff"`` (futures
+        resampled from the cycle's load), ``"cell_cutoff"`` or ``"horizon"``.
     average_end_s : float
         Time in s at which the average load alone reaches the cut-off (NaN beyond the horizon).
     charge_to_end_ah : float
@@ -56,6 +57,8 @@ class RuntimePrediction:
     end_temperature_k : float
         Lumped thermal cells: the (normal) cells' temperature where the average-load run ends (its cut-off or
         the horizon), K; NaN for isothermal cells.
+    peak_end_s : float
+        Time in s at which a load peak drawn at any moment first reaches the cut-off (NaN without peaks).
     """
 
     remaining_s: float
@@ -68,6 +71,7 @@ class RuntimePrediction:
     charge_to_end_ah: float = math.nan
     cell_limited: bool = False
     end_temperature_k: float = math.nan
+    peak_end_s: float = math.nan
 
 
 def run_end_temperature_k(run: SegmentRun) -> float:
@@ -278,11 +282,70 @@ def peak_crossing_s(runner: PackModel, start: RunStart, average: LoadPath, peak_
     return float(root)
 
 
+#: Futures drawn by :func:`sampled_end_s`, the length (s) of the history blocks they are made of, and the shortest
+#: history (s) they are drawn from (shorter: the peak-load crossing stands).
+SAMPLED_FUTURES = 24
+SAMPLED_BLOCK_S = 600.0
+SAMPLED_MIN_HISTORY_S = 1200.0
+
+
+def sampled_end_s(runner: PackModel, start: RunStart, history_a: np.ndarray, window_s: float, average: LoadPath,
+                  temperature_k: float, cutoff_voltage_v: float, average_end_s: float, *, quantile: float = 0.5,
+                  futures: int = SAMPLED_FUTURES, block_s: float = SAMPLED_BLOCK_S, seed: int = 0) -> float | None:
+    """Quantile ``quantile`` of the time (s) at which futures resampled from the cycle's windows reach the cut-off.
+
+    A random usage ends at the first load state heavy enough *at that charge*, not where its heaviest windows
+    would cross if they could come at any moment. Each future is the cycle's window currents (``history_a``, A,
+    one per ``window_s``) cut into blocks of ``block_s`` taken from random places, end to end, scaled so that
+    its mean follows the average load ahead (``average``: a constant current, or the rising current of a
+    constant power); the model runs it from ``start`` and it ends where the pack voltage first reaches
+    ``cutoff_voltage_v`` (or a cell its cut-off). A future still running at ``1.25 average_end_s`` + one block
+    counts as later than any answer. Seeded: the same state gives the same answer.
+
+    Returns None when the history is shorter than :data:`SAMPLED_MIN_HISTORY_S`, its mean is not a discharge,
+    or the quantile falls beyond the futures' horizon (then the caller's answer stands).
+    """
+    history_a = np.asarray(history_a, dtype=float)
+    mean_a = float(np.mean(history_a)) if history_a.size else math.nan
+    if history_a.size * window_s < SAMPLED_MIN_HISTORY_S or not (math.isfinite(mean_a) and mean_a > 0.0):
+        return None
+    if not (math.isfinite(average_end_s) and average_end_s > 0.0):
+        return None
+    horizon_s = 1.25 * average_end_s + block_s
+    n_windows = int(math.ceil(horizon_s / window_s))
+    block = max(1, min(int(round(block_s / window_s)), history_a.size))
+    scale = np.array([average.current_at((k + 0.5) * window_s) for k in range(n_windows)]) / mean_a
+    rng = np.random.default_rng(seed)
+    ends = []
+    for _ in range(futures):
+        starts = rng.integers(0, history_a.size - block + 1, size=n_windows // block + 1)
+        currents = np.concatenate([history_a[k:k + block] for k in starts])[:n_windows] * scale
+        run = runner.run(start, [(window_s, float(c)) for c in currents], temperature_k)
+        end = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
+        if end is None and run.reached_cutoff:
+            end = float(run.end_time_s)
+        ends.append(math.inf if end is None else end)
+    answer = float(np.quantile(np.array(ends), quantile, method="inverted_cdf"))
+    return answer if math.isfinite(answer) else None
+
+
+def sampled_fraction_of(prediction: RuntimePrediction) -> float | None:
+    """Where a sampled answer lies between its peak-load and average-load crossings (0 .. 1 and beyond), or None."""
+    if prediction.limited_by != "sampled_cutoff":
+        return None
+    span = prediction.average_end_s - prediction.peak_end_s
+    if not (math.isfinite(span) and span > 0.0):
+        return None
+    return (prediction.remaining_s - prediction.peak_end_s) / span
+
+
 def predict_remaining_runtime(runner: PackModel, voltage_v: float, current_a: float, temperature_k: float,
                               average_current_a: float, cutoff_voltage_v: float,
                               calibration: Calibration | None = None,
                               peak_current_a: float | None = None, peak_duration_s: float = 5.0,
-                              average_power_w: float | None = None, load_exponent: float = 1.0) -> RuntimePrediction:
+                              average_power_w: float | None = None, load_exponent: float = 1.0,
+                              end_event: str = "peak", load_history_a: np.ndarray | None = None,
+                              history_window_s: float = 5.0, sampled_fraction: float | None = None) -> RuntimePrediction:
     """Calibrate the SOC (unless given), then simulate the average load to the cut-off.
 
     Parameters
@@ -314,6 +377,16 @@ def predict_remaining_runtime(runner: PackModel, voltage_v: float, current_a: fl
         ``average_current_a``.
     load_exponent : float
         ``k`` (0 = constant current .. 1 = constant power) when ``average_power_w`` is given.
+    end_event : {"peak", "sampled"}
+        Where a load with peaks ends: ``"peak"`` at the peak-load crossing; ``"sampled"`` at the median end
+        of futures resampled from ``load_history_a`` (:func:`sampled_end_s`; ``limited_by`` is
+        ``"sampled_cutoff"``), or at the peak-load crossing when the history is too short.
+    load_history_a : numpy.ndarray, optional
+        The present cycle's window currents (A, positive = discharge, one per ``history_window_s`` s).
+    sampled_fraction : float, optional
+        With ``end_event="sampled"``: where an earlier sampled answer lay between its peak-load and average-load
+        crossings (0 at the first, 1 at the second; :func:`sampled_fraction_of`); the futures are not run again
+        and the answer keeps that place between the present crossings.
     """
     if not (math.isfinite(average_current_a) and average_current_a > 0):
         raise SimulationError(f"average discharge current must be > 0 A, got {average_current_a}")
@@ -334,9 +407,20 @@ def predict_remaining_runtime(runner: PackModel, voltage_v: float, current_a: fl
     if peak_current_a is not None and peak_current_a > average_current_a:
         t_peak = peak_crossing_s(runner, cal.start, path, float(peak_current_a) / average_current_a, temperature_k,
                                  cutoff_voltage_v, run, settle_s=peak_duration_s)
+        t_sampled = None
+        if t_peak is not None and end_event == "sampled" and t_avg is not None:
+            if sampled_fraction is not None and math.isfinite(sampled_fraction) and t_avg > t_peak:
+                t_sampled = max(0.0, t_peak + sampled_fraction * (t_avg - t_peak))
+            elif load_history_a is not None:
+                t_sampled = sampled_end_s(runner, cal.start, load_history_a, history_window_s, path, temperature_k,
+                                          cutoff_voltage_v, t_avg)
+        if t_sampled is not None:
+            return RuntimePrediction(t_sampled, cal, assumed_a, temperature_k, cutoff_voltage_v, "sampled_cutoff",
+                                     *ends, cell_limited=cell_limited, end_temperature_k=end_k,
+                                     peak_end_s=t_peak if t_peak is not None else math.nan)
         if t_peak is not None:
             return RuntimePrediction(t_peak, cal, assumed_a, temperature_k, cutoff_voltage_v, "peak_cutoff", *ends,
-                                     cell_limited=cell_limited, end_temperature_k=end_k)
+                                     cell_limited=cell_limited, end_temperature_k=end_k, peak_end_s=t_peak)
     t_pack = time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_voltage_v)
     if t_pack is not None:
         return RuntimePrediction(t_pack, cal, assumed_a, temperature_k, cutoff_voltage_v, "pack_cutoff", *ends,
