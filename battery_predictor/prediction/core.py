@@ -577,12 +577,14 @@ class PredictorCore:
             peak = self._load.quantile_a(self.config.peak_current_quantile,
                                          of_peaks=self.config.peak_source == "sample")
             kind = self._load_kind(r_ohm)
-            history_a = np.fromiter(self._load.currents, float) if self.config.end_event == "sampled" else None
-            stamps = np.fromiter(self._load.stamps, float) if history_a is not None else np.empty(0)
             cycle = self._load.sessions_ended
             reused = self._sampled
-        fraction = (reused[2] if reused is not None and reused[1] == cycle and 0.0 <= stamp - reused[0] < SAMPLED_REFRESH_S
-                    else None)
+            fraction = (reused[2] if reused is not None and reused[1] == cycle
+                        and 0.0 <= stamp - reused[0] < SAMPLED_REFRESH_S else None)
+            # the futures need the cycle's windows only when they run again
+            resample = self.config.end_event == "sampled" and fraction is None
+            history_a = np.fromiter(self._load.currents, float) if resample else None
+            stamps = np.fromiter(self._load.stamps, float) if resample else np.empty(0)
         window_s = float(np.median(np.diff(stamps))) if stamps.size > 1 else 5.0
         if v <= cutoff:
             return _invalid_runtime(stamp, cutoff, STATUS_BELOW_CUTOFF,

@@ -152,8 +152,12 @@ class LoadPath:
 
     def current_at(self, time_s: float) -> float:
         """Pack current (A) at ``time_s`` s."""
-        k = min(int(time_s // self.step_s), len(self.current_a) - 1)
-        return float(self.current_a[max(k, 0)])
+        return float(self.currents_at(np.array([time_s]))[0])
+
+    def currents_at(self, time_s: np.ndarray) -> np.ndarray:
+        """Pack currents (A) at the times ``time_s`` (s)."""
+        k = np.clip((np.asarray(time_s, dtype=float) // self.step_s).astype(int), 0, len(self.current_a) - 1)
+        return self.current_a[k]
 
 
 def demand_run(runner: PackModel, start: RunStart, current_a: float, power_w: float, exponent: float,
@@ -314,7 +318,7 @@ def sampled_end_s(runner: PackModel, start: RunStart, history_a: np.ndarray, win
     horizon_s = 1.25 * average_end_s + block_s
     n_windows = int(math.ceil(horizon_s / window_s))
     block = max(1, min(int(round(block_s / window_s)), history_a.size))
-    scale = np.array([average.current_at((k + 0.5) * window_s) for k in range(n_windows)]) / mean_a
+    scale = average.currents_at((np.arange(n_windows) + 0.5) * window_s) / mean_a
     rng = np.random.default_rng(seed)
     ends = []
     for _ in range(futures):
