@@ -43,6 +43,7 @@ from battery_predictor.evaluation.runtime_eval import (  # noqa: E402
     charge_to_end_ah,
     error_summary,
     evaluate_recording,
+    interval_coverage,
 )
 from battery_predictor.fitting.identifiable import pybamm_values  # noqa: E402
 from battery_predictor.io.loader import load_recording  # noqa: E402
@@ -86,7 +87,10 @@ def run_seed(seed: int, load_prior: str, work: Path, instrument: str = far.INSTR
     counter = [(c.counters_s[ORACLE], c.true_remaining_s) for c in result.checkpoints]
     return {"seed": seed, "errors_min": [round((p - t) / 60.0, 1) for p, t in errors],
             "summary": error_summary(errors, late_fraction_pairs=late), "off_by_half_after_30pct": over_half,
-            "answers_after_30pct": len(late), "oracle_counter_errors_min": [round((p - t) / 60.0, 1) for p, t in counter]}
+            "answers_after_30pct": len(late), "oracle_counter_errors_min": [round((p - t) / 60.0, 1) for p, t in counter],
+            "interval": interval_coverage(result.checkpoints),
+            "bands_min": [[round(c.p10_s / 60.0, 1), round(c.p90_s / 60.0, 1), round(c.true_remaining_s / 60.0, 1)]
+                          for c in result.checkpoints]}
 
 
 def main() -> None:
@@ -110,10 +114,12 @@ def main() -> None:
     scored = [r for r in rows if "summary" in r]
     pooled = [abs(e) for r in scored for e in r["errors_min"]]
     pooled_counter = [abs(e) for r in scored for e in r["oracle_counter_errors_min"]]
+    band = _pooled_band(scored)
     if args.json:
         print(json.dumps({"load_prior": args.load_prior, "seeds": rows,
                           "pooled_mae_min": float(np.mean(pooled)) if pooled else None,
-                          "pooled_oracle_counter_mae_min": float(np.mean(pooled_counter)) if pooled else None},
+                          "pooled_oracle_counter_mae_min": float(np.mean(pooled_counter)) if pooled else None,
+                          "pooled_interval": band},
                          indent=1, default=float))
         return
     for r in rows:
@@ -123,13 +129,26 @@ def main() -> None:
             s = r["summary"]
             print(f"seed {r['seed']}: MAE {s['mae_min']:.1f} min, bias {s['bias_min']:+.1f} min; errors "
                   + " ".join(f"{e:+.1f}" for e in r["errors_min"]) + "; oracle counter "
-                  + " ".join(f"{e:+.1f}" for e in r["oracle_counter_errors_min"]))
+                  + " ".join(f"{e:+.1f}" for e in r["oracle_counter_errors_min"])
+                  + f"; truth inside P10..P90 {r['interval']['inside_pct']:.0f} %")
     if pooled:
         off = sum(r["off_by_half_after_30pct"] for r in scored)
         after = sum(r["answers_after_30pct"] for r in scored)
         print(f"pooled over {len(scored)} days ({len(pooled)} answers), load prior {args.load_prior}: "
               f"MAE {np.mean(pooled):.1f} min, off by more than half after 30 %: {off} of {after}; "
               f"{ORACLE}: MAE {np.mean(pooled_counter):.1f} min")
+        print(f"truth inside P10..P90 at {band['inside_pct']:.0f} % of {band['intervals']} answers "
+              f"(below P10 {band['below_p10_pct']:.0f} %, above P90 {band['above_p90_pct']:.0f} %; target 80 / 10 / 10)")
+
+
+def _pooled_band(rows: list[dict]) -> dict[str, float]:
+    """The per-day :func:`interval_coverage` figures of ``rows`` pooled, weighted by their answers."""
+    n = sum(r["interval"]["intervals"] for r in rows)
+    pooled = {"intervals": n}
+    for key in ("inside_pct", "below_p10_pct", "above_p90_pct"):
+        pooled[key] = (sum(r["interval"][key] * r["interval"]["intervals"] for r in rows if r["interval"]["intervals"]) / n
+                       if n else float("nan"))
+    return pooled
 
 
 if __name__ == "__main__":
