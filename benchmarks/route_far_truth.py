@@ -17,7 +17,7 @@ wasted rejects, and the error of the P50 voltage after the route against the tru
 Run::
 
     nice .venv/bin/python benchmarks/route_far_truth.py --seeds 60 61 [--every 20] [--instrument paper|5s]
-        [--drift-correction full|smallest] [--work DIR] [--json]
+        [--drift-correction auto|full|smallest] [--work DIR] [--json]
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def main() -> None:
     ap.add_argument("--seeds", nargs="+", type=int, default=[60])
     ap.add_argument("--every", type=float, default=20.0, help="minutes between route questions along day 2")
     ap.add_argument("--instrument", choices=far.INSTRUMENTS, default=far.INSTRUMENT)
-    ap.add_argument("--drift-correction", choices=DRIFT_CORRECTIONS, default="full",
+    ap.add_argument("--drift-correction", choices=DRIFT_CORRECTIONS, default=PredictorConfig.drift_correction,
                     help="the predictor's drift_correction (node parameter; default: the node's default)")
     ap.add_argument("--work", type=Path, default=None,
                     help="keep the days and fits here and reuse a kept fit (ask one fit several ways)")

@@ -51,8 +51,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--load-time-constant-s", type=float, default=None, metavar="S",
                    help="time constant of --load-estimator ewma, s (default: the predictor's, 1800; node parameter "
                         "load_time_constant_s)")
-    p.add_argument("--drift-correction", choices=("full", "smallest"), default=None,
-                   help="where a carried state that left the state tolerance goes (default: the predictor's, full; "
+    p.add_argument("--drift-correction", choices=("auto", "full", "smallest"), default=None,
+                   help="where a carried state that left the state tolerance goes (default: the predictor's, auto; "
                         "see the node parameter drift_correction)")
     p.add_argument("--end-event", choices=("peak", "sampled"), default=None,
                    help="where a load with peaks ends: where a quantile peak drawn at any moment crosses (peak), or "

@@ -281,7 +281,8 @@ class PredictorNode(Node):
                 self, "drift_correction", PredictorConfig.drift_correction,
                 "A carried state more than state_tolerance_v_per_cell off the measurement is recalibrated onto "
                 "it ('full') or just inside the tolerance, half of it left on the side it left ('smallest'; "
-                "for flat-OCV cells such as LiFePO4).", DRIFT_CORRECTIONS),
+                "for flat-OCV cells such as LiFePO4); 'auto' takes 'smallest' where the OCVs within the tolerance "
+                "span more than 0.3 of the capacity (a flat OCV), else 'full'.", DRIFT_CORRECTIONS),
             end_event=declare_str(
                 self, "end_event", PredictorConfig.end_event,
                 "Where the runtime of a load with peaks ends: where a peak at peak_current_quantile drawn at any moment "

@@ -41,6 +41,7 @@ from battery_predictor.prediction.uncertainty import (
     evaluate_route_at_risk,
     future_load_sigma,
     interval,
+    ocv_band_soc_span,
     runtime_spread,
     uncertainty_model,
 )
@@ -135,11 +136,13 @@ class PredictorConfig:
         with the measured current (charge counting through the model), which is more reliable
         than a voltage calibration under load on a flat OCV (LiFePO4).
     drift_correction : str
-        What a carried state that left ``state_tolerance_v_per_cell`` is moved to: ``"full"`` (default; a
-        fresh calibration onto the measured voltage) or ``"smallest"`` (a calibration that leaves half the
-        tolerance on the side the state left: the smallest correction consistent with the measurement).
-        Where the OCV is flat (LiFePO4's plateau) a voltage the model misses by the tolerance is a large part
-        of the charge. Measured (docs/runtime_real_data/other_cells.md): the fit recordings of three cells
+        What a carried state that left ``state_tolerance_v_per_cell`` is moved to: ``"full"`` (a fresh calibration
+        onto the measured voltage), ``"smallest"`` (a calibration that leaves half the tolerance on the side the
+        state left: the smallest correction consistent with the measurement), or ``"auto"`` (default):
+        ``"smallest"`` where the OCVs within the tolerance of the state's span more than :data:`FLAT_OCV_SOC_SPAN` of
+        the capacity, ``"full"`` elsewhere (and where the model gives no OCV). Where the OCV is flat
+        (LiFePO4's plateau) a voltage the model misses by the tolerance is a large part of the charge and says
+        little about the state. Measured (docs/runtime_real_data/other_cells.md): the fit recordings of three cells
         tie (pooled MAE 3.65 full / 3.72 smallest min); held out, K2 LiFePO4 7.5 -> 3.8 min, LG M50 6.9 -> 7.1.
     end_event : str
         Where the runtime of a load with peaks ends: ``"peak"`` (default) where a peak at
@@ -185,7 +188,7 @@ class PredictorConfig:
     peak_duration_s: float = 1.0
     simulator: str = "auto"
     decision_risk: float = 0.1
-    drift_correction: str = "full"
+    drift_correction: str = "auto"
     end_event: str = "peak"
     thermal_forecast: str = "auto"
     ambient_temperature_k: float = math.nan
@@ -194,7 +197,11 @@ class PredictorConfig:
 #: What of the average load the runtime keeps constant (``PredictorConfig.load_model``).
 LOAD_MODELS = ("auto", "power", "current")
 #: Where a carried state that left the tolerance band goes (``PredictorConfig.drift_correction``).
-DRIFT_CORRECTIONS = ("full", "smallest")
+DRIFT_CORRECTIONS = ("auto", "full", "smallest")
+#: ``drift_correction "auto"`` corrects a drifted state by the smallest step where the OCVs within the state
+#: tolerance span more than this share of the capacity (:func:`~.uncertainty.ocv_band_soc_span`; shipped NMC params:
+#: 0.1-0.18 between 10 and 90 % SOC; LiFePO4: 0.45-0.85 on its plateaus, 0.2-0.3 at their ends).
+FLAT_OCV_SOC_SPAN = 0.3
 #: Where the runtime of a load with peaks ends (``PredictorConfig.end_event``).
 END_EVENTS = ("peak", "sampled")
 #: How long (s of pack-state time) a ``"sampled"`` answer's place between the peak-load and the average-load
@@ -464,13 +471,20 @@ class PredictorCore:
                 propagated = self._propagate(cached, hist, temperature_k, heating)
                 if propagated is not None:
                     return propagated
-                if self.config.drift_correction == "smallest" and math.isfinite(self._drift_v):
+                if math.isfinite(self._drift_v) and self._corrects_smallest(cached[2].soc, temperature_k):
                     # the carried state left the tolerance band: move it back just inside, on the side it left
                     # (half the band), not onto the measurement: where the OCV is flat (LiFePO4's plateau) a
                     # voltage the model misses by the tolerance is a large part of the charge
                     target = math.copysign(0.5 * self.state_tolerance_v, self._drift_v)
                     return self._calibrate_fresh(hist, temperature_k, heating, target_residual_v=target)
             return self._calibrate_fresh(hist, temperature_k, heating)
+
+    def _corrects_smallest(self, soc: float, temperature_k: float) -> bool:
+        """Whether a drifted state at ``soc`` moves just inside the tolerance band (``drift_correction``)."""
+        if self.config.drift_correction != "auto":
+            return self.config.drift_correction == "smallest"
+        span = ocv_band_soc_span(self._runner(), soc, self.state_tolerance_v, temperature_k)
+        return span > FLAT_OCV_SOC_SPAN
 
     def precalibrate(self) -> None:
         """Calibrate the latest pack state now, at its temperature, so the next answers find it cached.

@@ -192,6 +192,27 @@ def test_a_drifted_state_moves_onto_the_measurement_or_just_inside_the_tolerance
     assert cal.residual_v == pytest.approx(expected, abs=0.01)
 
 
+@pytest.mark.parametrize(("params_file", "voltage_v", "current_a", "step_v", "smallest"),
+                         [("temi.yaml", 15.2, 2.0, 0.03, False), ("ranger_mini.yaml", 49.0, 3.0, 0.05, True)])
+def test_auto_drift_correction_is_smallest_only_where_the_ocv_is_flat(params_file, voltage_v, current_a, step_v,
+                                                                      smallest):
+    # the NMC Temi's OCV pins the state to a few % within the tolerance: onto the measurement; on the LiFePO4
+    # Ranger's plateau the tolerance spans most of the capacity: just inside the band
+    core = PredictorCore(PredictorConfig(params_file=str(PARAMS / params_file)))
+    assert core.config.drift_correction == "auto"
+    last = feed(core, 0.0, 900.0, voltage_v, current_a)
+    core.calibration(T_K)
+    v, cal, t = voltage_v, None, last
+    while not any("propagated state" in why for _, why in core.events):
+        v -= step_v
+        t += 5.0
+        core.update_state(t, v, current_a, T_K)
+        cal = core.calibration(T_K)
+        assert t < last + 600.0, "the drift was never noticed"
+    expected = 0.5 * core.state_tolerance_v if smallest else 0.0
+    assert cal.residual_v == pytest.approx(expected, abs=0.003 * core.params.series)
+
+
 def test_an_unknown_drift_correction_is_refused():
     with pytest.raises(ValueError, match="drift_correction"):
         PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml"), drift_correction="half"))
