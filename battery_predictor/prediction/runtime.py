@@ -293,21 +293,20 @@ SAMPLED_BLOCK_S = 600.0
 SAMPLED_MIN_HISTORY_S = 1200.0
 
 
-def sampled_end_s(runner: PackModel, start: RunStart, history_a: np.ndarray, window_s: float, average: LoadPath,
-                  temperature_k: float, cutoff_voltage_v: float, average_end_s: float, *, quantile: float = 0.5,
-                  futures: int = SAMPLED_FUTURES, block_s: float = SAMPLED_BLOCK_S, seed: int = 0) -> float | None:
-    """Quantile ``quantile`` of the time (s) at which futures resampled from the cycle's windows reach the cut-off.
+def sampled_ends_s(runner: PackModel, start: RunStart, history_a: np.ndarray, window_s: float, average: LoadPath,
+                   temperature_k: float, cutoff_voltage_v: float, average_end_s: float, *,
+                   futures: int = SAMPLED_FUTURES, block_s: float = SAMPLED_BLOCK_S, seed: int = 0) -> np.ndarray | None:
+    """The times (s) at which futures resampled from the cycle's windows reach the cut-off, one per future.
 
-    A random usage ends at the first load state heavy enough *at that charge*, not where its heaviest windows
-    would cross if they could come at any moment. Each future is the cycle's window currents (``history_a``, A,
-    one per ``window_s``) cut into blocks of ``block_s`` taken from random places, end to end, scaled so that
-    its mean follows the average load ahead (``average``: a constant current, or the rising current of a
-    constant power); the model runs it from ``start`` and it ends where the pack voltage first reaches
-    ``cutoff_voltage_v`` (or a cell its cut-off). A future still running at ``1.25 average_end_s`` + one block
-    counts as later than any answer. Seeded: the same state gives the same answer.
+    Each future is the cycle's window currents (``history_a``, A, one per ``window_s``) cut into blocks of
+    ``block_s`` taken from random places, end to end, scaled so that its mean follows the average load ahead
+    (``average``: a constant current, or the rising current of a constant power); the model runs it from
+    ``start`` and it ends where the pack voltage first reaches ``cutoff_voltage_v`` (or a cell its cut-off). A
+    future still running at ``1.25 average_end_s`` + one block ends at ``inf`` (later than any answer). Seeded:
+    the same state gives the same futures.
 
     Returns None when the history is shorter than :data:`SAMPLED_MIN_HISTORY_S`, its mean is not a discharge,
-    or the quantile falls beyond the futures' horizon (then the caller's answer stands).
+    or ``average_end_s`` is not a positive time.
     """
     history_a = np.asarray(history_a, dtype=float)
     mean_a = float(np.mean(history_a)) if history_a.size else math.nan
@@ -329,7 +328,23 @@ def sampled_end_s(runner: PackModel, start: RunStart, history_a: np.ndarray, win
         if end is None and run.reached_cutoff:
             end = float(run.end_time_s)
         ends.append(math.inf if end is None else end)
-    answer = float(np.quantile(np.array(ends), quantile, method="inverted_cdf"))
+    return np.array(ends)
+
+
+def sampled_end_s(runner: PackModel, start: RunStart, history_a: np.ndarray, window_s: float, average: LoadPath,
+                  temperature_k: float, cutoff_voltage_v: float, average_end_s: float, *, quantile: float = 0.5,
+                  futures: int = SAMPLED_FUTURES, block_s: float = SAMPLED_BLOCK_S, seed: int = 0) -> float | None:
+    """Quantile ``quantile`` of :func:`sampled_ends_s` (s): where a random usage's futures reach the cut-off.
+
+    A random usage ends at the first load state heavy enough *at that charge*, not where its heaviest windows
+    would cross if they could come at any moment. Returns None where :func:`sampled_ends_s` does, or when the
+    quantile falls beyond the futures' horizon (then the caller's answer stands).
+    """
+    ends = sampled_ends_s(runner, start, history_a, window_s, average, temperature_k, cutoff_voltage_v,
+                          average_end_s, futures=futures, block_s=block_s, seed=seed)
+    if ends is None:
+        return None
+    answer = float(np.quantile(ends, quantile, method="inverted_cdf"))
     return answer if math.isfinite(answer) else None
 
 

@@ -9,8 +9,9 @@ as ``evaluate-runtime`` feeds them; at 30 % .. 90 % of the discharge it prints
 - ``answer``: the core's answer (min);
 - ``known load``: the model run from the core's calibrated state with the day's *actual* windows ahead (min):
   what the answer would be if the load ahead were known;
-- ``PIT``: the share of 40 sampled futures (the core's own ``sampled_end_s``, 20 quantiles) that end before the
-  truth. For futures drawn like the day's own future it would be uniform on 0..1.
+- ``PIT``: the share of 40 sampled futures (the core's own ``sampled_ends_s``) that end before the truth. For
+  futures drawn like the day's own future it would be uniform on 0..1. (Until 2026-11-28 it was the share of 20
+  quantiles of the 40 ends, each quantile running the futures again; the figures in the README were made so.)
 
 Run from the repository::
 
@@ -34,7 +35,6 @@ from battery_predictor.params import load_params  # noqa: E402
 from battery_predictor.prediction.core import PredictorConfig, PredictorCore  # noqa: E402
 
 THRESHOLD_V = 13.30
-QUANTILES = np.linspace(0.025, 0.975, 20)
 SHIPPED = runtime.sampled_end_s
 
 
@@ -50,8 +50,8 @@ def check_day(work: Path, seed: int) -> list[float]:
 
     def capture(runner, start, history_a, window_s, average, temperature_k, cutoff_v, average_end_s, **kw):
         seen.update(runner=runner, start=start, temperature_k=temperature_k,
-                    ends=[SHIPPED(runner, start, history_a, window_s, average, temperature_k, cutoff_v, average_end_s,
-                                  quantile=q, futures=40) for q in QUANTILES])
+                    ends=runtime.sampled_ends_s(runner, start, history_a, window_s, average, temperature_k, cutoff_v,
+                                                average_end_s, futures=40))
         return SHIPPED(runner, start, history_a, window_s, average, temperature_k, cutoff_v, average_end_s, **kw)
 
     runtime.sampled_end_s = capture
@@ -74,8 +74,7 @@ def check_day(work: Path, seed: int) -> list[float]:
             ahead = [(5.0, float(c)) for c in win.current_a[k:]] + [(5.0, float(win.current_a[-1]))] * 200
             run = seen["runner"].run(seen["start"], ahead, seen["temperature_k"])
             known_s = runtime.time_to_voltage_s(run.time_s, run.pack_voltage_v, THRESHOLD_V)
-            ends = np.array([math.inf if e is None else e for e in seen["ends"]])
-            pit = float(np.mean(ends < truth_s))
+            pit = float(np.mean(seen["ends"] < truth_s))
             pits.append(pit)
             print(f"  {fraction:.1f}: truth {truth_s / 60:6.1f}  answer {answer.remaining_s / 60:6.1f}  known load "
                   f"{(known_s or math.nan) / 60:6.1f}  PIT {pit:.2f}")

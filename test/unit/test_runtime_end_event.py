@@ -16,6 +16,7 @@ from battery_predictor.prediction.runtime import (
     LoadPath,
     predict_remaining_runtime,
     sampled_end_s,
+    sampled_ends_s,
 )
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
@@ -77,6 +78,16 @@ def test_the_same_state_and_history_give_the_same_sampled_answer(temi_engine, ha
     path = LoadPath.constant(float(np.mean(history)), 2.0 * sampled.average_end_s)
     again = sampled_end_s(temi_engine, half_full.start, history, WINDOW_S, path, 298.15, 13.30, sampled.average_end_s)
     assert again == sampled.remaining_s
+
+
+def test_the_sampled_answer_is_the_quantile_of_every_futures_end(temi_engine, half_full):
+    history = _bursts()
+    _, sampled = _answers(temi_engine, half_full, history)
+    path = LoadPath.constant(float(np.mean(history)), 2.0 * sampled.average_end_s)
+    args = (temi_engine, half_full.start, history, WINDOW_S, path, 298.15, 13.30, sampled.average_end_s)
+    ends = sampled_ends_s(*args, futures=8)
+    assert ends.shape == (8,) and np.all(ends > 0)
+    assert sampled_end_s(*args, futures=8, quantile=0.75) == float(np.quantile(ends, 0.75, method="inverted_cdf"))
 
 
 def test_a_history_shorter_than_the_minimum_keeps_the_peak_load_crossing(temi_engine, half_full):
