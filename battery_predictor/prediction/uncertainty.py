@@ -358,9 +358,8 @@ def ocv_band_soc_span(runner: PackModel, soc: float, band_v: float, temperature_
     lo, hi = runner.soc_bounds
     kelvin = float(round(temperature_k))
     grid = np.round(np.arange(lo, hi + 0.5 * SPAN_GRID, SPAN_GRID), 6)
-    centre = float(grid[np.argmin(np.abs(grid - soc))])
     ocv = np.array([_relaxed_pack_voltage_v(runner, float(g), kelvin) for g in grid])
-    here = _relaxed_pack_voltage_v(runner, centre, kelvin)
+    here = float(ocv[np.argmin(np.abs(grid - soc))])
     if not math.isfinite(here):
         return math.nan
     return SPAN_GRID * float(np.count_nonzero(np.abs(ocv - here) <= band_v))
