@@ -19,7 +19,7 @@ before 2026-11-28.
 Run::
 
     nice .venv/bin/python benchmarks/runtime_far_truth.py --seeds 60 61 62 [--load-prior params|power]
-        [--instrument paper|5s] [--drift-correction auto|full|smallest] [--end-event peak|sampled] [--work DIR] [--json]
+        [--instrument paper|5s] [--drift-correction auto|full|smallest] [--end-event auto|peak|sampled] [--work DIR] [--json]
 """
 
 from __future__ import annotations
@@ -100,7 +100,7 @@ def main() -> None:
     ap.add_argument("--instrument", choices=far.INSTRUMENTS, default=far.INSTRUMENT)
     ap.add_argument("--drift-correction", choices=DRIFT_CORRECTIONS, default=PredictorConfig.drift_correction,
                     help="the predictor's drift_correction (node parameter; default: the node's default)")
-    ap.add_argument("--end-event", choices=END_EVENTS, default="peak",
+    ap.add_argument("--end-event", choices=END_EVENTS, default=PredictorConfig.end_event,
                     help="the predictor's end_event (node parameter; default: the node's default)")
     ap.add_argument("--work", type=Path, default=None,
                     help="keep the days and fits here and reuse a kept fit (score one fit several ways)")

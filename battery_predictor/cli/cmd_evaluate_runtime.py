@@ -54,10 +54,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--drift-correction", choices=("auto", "full", "smallest"), default=None,
                    help="where a carried state that left the state tolerance goes (default: the predictor's, auto; "
                         "see the node parameter drift_correction)")
-    p.add_argument("--end-event", choices=("peak", "sampled"), default=None,
-                   help="where a load with peaks ends: where a quantile peak drawn at any moment crosses (peak), or "
-                        "the median end of futures resampled from the cycle's windows (sampled) (default: the "
-                        "predictor's, peak; see the node parameter end_event)")
+    p.add_argument("--end-event", choices=("auto", "peak", "sampled"), default=None,
+                   help="where a load with peaks ends: where a quantile peak drawn at any moment crosses (peak), "
+                        "the median end of futures resampled from the cycle's windows (sampled), or sampled where "
+                        "the cycle's heavy windows last 15 s or more on average, else peak (auto) (default: the "
+                        "predictor's, auto; see the node parameter end_event)")
     p.add_argument("--thermal-forecast", choices=("auto", "held"), default=None,
                    help="the cell temperature ahead: integrated by the params' lumped thermal cell when they carry one "
                         "(auto), or held at the latest measurement (default: the predictor's, auto; see the node "

@@ -287,7 +287,9 @@ class PredictorNode(Node):
                 self, "end_event", PredictorConfig.end_event,
                 "Where the runtime of a load with peaks ends: where a peak at peak_current_quantile drawn at any moment "
                 "reaches the cut-off ('peak'), or the median end of futures resampled in 10 min blocks from the "
-                "cycle's own windows ('sampled').", END_EVENTS),
+                "cycle's own windows ('sampled'); 'auto' takes 'sampled' where the cycle's heavy windows (at or above "
+                "their 0.9 quantile) last 15 s or more on average (a robot's usage states), else 'peak' (a drive "
+                "cycle's short spikes).", END_EVENTS),
             thermal_forecast=declare_str(
                 self, "thermal_forecast", PredictorConfig.thermal_forecast,
                 "The cell temperature ahead of the runtime forecast: 'auto' integrates it from the latest measured "

@@ -22,7 +22,7 @@ import numpy as np
 from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.params import PackParams, load_params
 from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, history_segments
-from battery_predictor.prediction.load_estimate import LoadEstimator, LoadKind
+from battery_predictor.prediction.load_estimate import LoadEstimator, LoadKind, heavy_run_s
 from battery_predictor.prediction.pack_model import PackModel, pack_model
 from battery_predictor.prediction.priority import RoutePriority, YieldingRunner
 from battery_predictor.prediction.route import RouteDecision, rejected
@@ -145,10 +145,13 @@ class PredictorConfig:
         little about the state. Measured (docs/runtime_real_data/other_cells.md): the fit recordings of three cells
         tie (pooled MAE 3.65 full / 3.72 smallest min); held out, K2 LiFePO4 7.5 -> 3.8 min, LG M50 6.9 -> 7.1.
     end_event : str
-        Where the runtime of a load with peaks ends: ``"peak"`` (default) where a peak at
-        ``peak_current_quantile`` drawn at any moment would reach the cut-off; ``"sampled"`` at the median end of
-        futures resampled in 10 min blocks from the cycle's own windows (:func:`.runtime.sampled_end_s`), the
-        first load state heavy enough at that charge. The futures run at most every :data:`SAMPLED_REFRESH_S` of
+        Where the runtime of a load with peaks ends: ``"peak"`` where a peak at ``peak_current_quantile`` drawn
+        at any moment would reach the cut-off; ``"sampled"`` at the median end of futures resampled in 10 min
+        blocks from the cycle's own windows (:func:`.runtime.sampled_end_s`), the first load state heavy enough
+        at that charge; ``"auto"`` (default): ``"sampled"`` where the windows resolve the load's states (the
+        cycle's heavy windows come in runs of :data:`RESOLVED_STATE_S` and :data:`RESOLVED_STATE_WINDOWS` windows
+        or more on average), ``"peak"`` where the load changes within a window or two (a drive cycle: its
+        sub-window spikes end the discharge, and futures of window means would miss them). The futures run at most every :data:`SAMPLED_REFRESH_S` of
         pack-state time; in between an answer keeps the last one's place between the peak-load and the
         average-load crossings.
     thermal_forecast : str
@@ -189,7 +192,7 @@ class PredictorConfig:
     simulator: str = "auto"
     decision_risk: float = 0.1
     drift_correction: str = "auto"
-    end_event: str = "peak"
+    end_event: str = "auto"
     thermal_forecast: str = "auto"
     ambient_temperature_k: float = math.nan
 
@@ -203,7 +206,17 @@ DRIFT_CORRECTIONS = ("auto", "full", "smallest")
 #: 0.1-0.18 between 10 and 90 % SOC; LiFePO4: 0.45-0.85 on its plateaus, 0.2-0.3 at their ends).
 FLAT_OCV_SOC_SPAN = 0.3
 #: Where the runtime of a load with peaks ends (``PredictorConfig.end_event``).
-END_EVENTS = ("peak", "sampled")
+END_EVENTS = ("auto", "peak", "sampled")
+#: ``end_event "auto"`` takes ``"sampled"`` where the cycle's heavy windows (at or above this quantile of its
+#: discharge windows) come in runs of at least :data:`RESOLVED_STATE_S` on average
+#: (:func:`~.load_estimate.heavy_run_s`), else ``"peak"``.
+HEAVY_WINDOW_QUANTILE = 0.9
+#: Mean heavy run (s) from which the windows resolve the load's states. Measured on data: drive cycles
+#: (Panasonic 18650PF, 11 files) 7-11 s, constant currents and HPPC pulses 5-8 s; a Temi's random usage 12-54 s,
+#: the Ranger's routes 14-63 s.
+RESOLVED_STATE_S = 15.0
+#: ... and at least this many windows, whatever the monitor's window length.
+RESOLVED_STATE_WINDOWS = 3
 #: How long (s of pack-state time) a ``"sampled"`` answer's place between the peak-load and the average-load
 #: crossings is reused before its futures are run again (the cycle's load statistics change slowly; the futures
 #: take about a second).
@@ -561,6 +574,14 @@ class PredictorCore:
     def _peak_duration_s(self) -> float:
         return self.config.peak_duration_s if self.config.peak_source == "sample" else 5.0
 
+    def _end_event(self, stamps_s: np.ndarray, currents_a: np.ndarray, window_s: float) -> str:
+        """The end event of the present answer: the configured one, or ``"auto"``'s choice from the cycle's windows
+        (stamps in s, currents in A, ``window_s`` their length in s)."""
+        if self.config.end_event != "auto":
+            return self.config.end_event
+        run_s = heavy_run_s(stamps_s, currents_a, HEAVY_WINDOW_QUANTILE)
+        return "sampled" if run_s >= max(RESOLVED_STATE_S, RESOLVED_STATE_WINDOWS * window_s) else "peak"
+
     def _temperature(self, temperature_k: float) -> float:
         return temperature_k if plausible_temperature(temperature_k) else self.default_temperature_k
 
@@ -595,11 +616,13 @@ class PredictorCore:
             reused = self._sampled
             fraction = (reused[2] if reused is not None and reused[1] == cycle
                         and 0.0 <= stamp - reused[0] < SAMPLED_REFRESH_S else None)
-            # the futures need the cycle's windows only when they run again
-            resample = self.config.end_event == "sampled" and fraction is None
-            history_a = np.fromiter(self._load.currents, float) if resample else None
-            stamps = np.fromiter(self._load.stamps, float) if resample else np.empty(0)
+            windows = self.config.end_event == "auto" or (self.config.end_event == "sampled" and fraction is None)
+            history_a = np.fromiter(self._load.currents, float) if windows else np.empty(0)
+            stamps = np.fromiter(self._load.stamps, float) if windows else np.empty(0)
         window_s = float(np.median(np.diff(stamps))) if stamps.size > 1 else 5.0
+        end_event = self._end_event(stamps, history_a, window_s)
+        # the futures need the cycle's windows only when they run again
+        resample = end_event == "sampled" and fraction is None
         if v <= cutoff:
             return _invalid_runtime(stamp, cutoff, STATUS_BELOW_CUTOFF,
                                     f"pack voltage {v:.2f} V is at or below the cut-off {cutoff:.2f} V",
@@ -625,8 +648,8 @@ class PredictorCore:
                                              calibration=cal,
                                              peak_current_a=peak if math.isfinite(peak) else None,
                                              peak_duration_s=self._peak_duration_s(), average_power_w=power,
-                                             load_exponent=kind.exponent, end_event=self.config.end_event,
-                                             load_history_a=history_a,
+                                             load_exponent=kind.exponent, end_event=end_event,
+                                             load_history_a=history_a if resample else None,
                                              history_window_s=min(max(window_s, 0.1), 60.0),
                                              sampled_fraction=fraction)
         except BatteryPredictorError as exc:

@@ -200,6 +200,41 @@ class LoadEstimator:
         return float(np.quantile(np.fromiter(values, float), min(q, 1.0)))
 
 
+def heavy_run_s(stamps_s: npt.ArrayLike, currents_a: npt.ArrayLike, quantile: float) -> float:
+    """Mean duration (s) of the runs of consecutive heavy windows: at or above ``quantile`` of the discharge
+    windows and above their median.
+
+    It says whether the windows resolve the load's states: a robot's usage holds a heavy state for tens of
+    seconds to minutes (runs of many windows), a drive cycle's heavy moments are shorter than a window or
+    two. A window's length is the median step of ``stamps_s``; a step longer than 1.5 windows ends a run.
+
+    Parameters
+    ----------
+    stamps_s, currents_a : array_like
+        Window stamps (s) and mean currents (A, positive = discharge), in time order.
+    quantile : float
+        Quantile (0 .. 1) of the discharge windows (> 0 A) that makes a window heavy.
+
+    Returns
+    -------
+    float
+        The mean run length in s; NaN with fewer than two discharge windows or none heavy (a constant load).
+    """
+    t = np.asarray(stamps_s, dtype=float)
+    i = np.asarray(currents_a, dtype=float)
+    discharge = i[i > 0.0]
+    if t.size != i.size or discharge.size < 2:
+        return math.nan
+    window_s = float(np.median(np.diff(t)))
+    if not (math.isfinite(window_s) and window_s > 0.0):
+        return math.nan
+    level = float(np.quantile(discharge, min(max(quantile, 0.0), 1.0)))
+    heavy = (i >= level) & (i > float(np.median(discharge)))  # a window at the usual level is not heavy
+    joined = np.concatenate([[False], heavy[1:] & heavy[:-1] & (np.diff(t) <= 1.5 * window_s)])
+    runs = int(np.count_nonzero(heavy & ~joined))
+    return float(np.count_nonzero(heavy)) * window_s / runs if runs else math.nan
+
+
 @dataclass(frozen=True)
 class LoadKind:
     """Whether the cycle's load behaves as a current or as a power.

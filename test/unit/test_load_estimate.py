@@ -10,7 +10,7 @@ import pytest
 
 from battery_predictor.io.loader import load_recording
 from battery_predictor.monitor.core import monitor_windows
-from battery_predictor.prediction.load_estimate import LoadEstimator
+from battery_predictor.prediction.load_estimate import LoadEstimator, heavy_run_s
 
 PANASONIC = Path(__file__).resolve().parents[3] / "shared" / "data" / "panasonic_18650pf"
 
@@ -188,3 +188,23 @@ def test_a_constant_current_discharge_is_a_current_load():
     assert early.decided and early.exponent == 0.0
     power = load_kind(t, 20.0 / v, v, 0.0, prior=0.0)  # a constant-power test
     assert power.decided and power.exponent == 1.0
+
+
+def test_heavy_run_is_one_window_for_spikes_and_the_state_length_for_held_states():
+    t = np.arange(720) * 5.0
+    spikes = np.where(np.arange(720) % 12 == 0, 4.0, 1.5)  # one heavy 5 s window a minute
+    assert heavy_run_s(t, spikes, 0.9) == pytest.approx(5.0)
+    states = np.where((np.arange(720) // 24) % 5 == 0, 3.0, 1.0)  # 2 min at 3 A every 10 min
+    assert heavy_run_s(t, states, 0.9) == pytest.approx(120.0)
+
+
+def test_a_gap_between_windows_ends_a_heavy_run():
+    t = np.concatenate([np.arange(10) * 5.0, 1000.0 + np.arange(10) * 5.0])
+    i = np.concatenate([np.full(10, 1.0), np.full(10, 1.0)])
+    i[6:14] = 3.0  # eight heavy windows across the gap: two runs of four
+    assert heavy_run_s(t, i, 0.5) == pytest.approx(20.0)
+
+
+def test_heavy_run_needs_two_discharge_windows():
+    assert math.isnan(heavy_run_s([0.0, 5.0, 10.0], [-1.0, 0.0, 2.0], 0.9))
+    assert math.isnan(heavy_run_s([], [], 0.9))

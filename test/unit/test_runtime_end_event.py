@@ -136,3 +136,27 @@ def test_between_refreshes_the_core_keeps_the_sampled_answers_place_between_the_
     assert all(a.valid and "resampled" in a.reason for a in answers)
     span_s = WINDOW_S * (599 - 360)
     assert len(calls) == int(span_s // SAMPLED_REFRESH_S) + 1  # the futures ran once per refresh, not per answer
+
+
+def _auto_answer(current_of_window, window_s=WINDOW_S):
+    core = PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml")))
+    assert core.config.end_event == "auto"
+    n = int(2000 / window_s)  # 33 min of windows
+    for k in range(n):
+        core.update_state(window_s * k, 15.4, current_of_window(k), 298.15)
+    return core.remaining_runtime(window_s * (n - 1))
+
+
+def test_auto_end_event_resamples_a_load_whose_heavy_states_last_minutes():
+    status = _auto_answer(lambda k: 3.0 if (k // 24) % 5 == 0 else 1.2)  # 2 min at 3 A every 10 min
+    assert status.valid and "resampled" in status.reason, status.reason
+
+
+def test_auto_end_event_keeps_the_peak_crossing_for_one_window_spikes():
+    status = _auto_answer(lambda k: 4.0 if k % 12 == 0 else 1.5)  # a heavy 5 s window every minute
+    assert status.valid and "A peaks" in status.reason and "resampled" not in status.reason, status.reason
+
+
+def test_auto_end_event_asks_for_three_windows_per_heavy_state_whatever_the_window_length():
+    status = _auto_answer(lambda k: 4.0 if k % 4 == 0 else 1.5, window_s=30.0)  # one heavy 30 s window in four
+    assert status.valid and "A peaks" in status.reason and "resampled" not in status.reason, status.reason
