@@ -12,13 +12,17 @@ said so.
 Beside the predictor: a Coulomb counter told the charge day 2 actually delivers to 13.30 V (an oracle:
 remaining Ah / mean current so far), so that what remains of its error is the forecast of the load.
 
+``--pack ranger`` does the same for the luggage robot: ``params/ranger_mini.yaml``, its far-truth days of longest
+routes at random payloads with standstills, day 2 from rest at 3.33 V per cell, cut-off the node's (the params'
+pack minimum, 45.00 V).
+
 ``--load-prior power`` removes the fitted params' ``operating.load_prior_power_fraction`` before scoring:
 the predictor's ``load_model auto`` then assumes a constant power until the day's windows decide, as
 before 2026-11-28.
 
 Run::
 
-    nice .venv/bin/python benchmarks/runtime_far_truth.py --seeds 60 61 62 [--load-prior params|power]
+    nice .venv/bin/python benchmarks/runtime_far_truth.py --seeds 60 61 62 [--pack temi|ranger] [--load-prior params|power]
         [--instrument paper|5s] [--drift-correction auto|full|smallest] [--end-event auto|peak|sampled] [--work DIR] [--json]
 """
 
@@ -51,36 +55,44 @@ from battery_predictor.params import load_params  # noqa: E402
 from battery_predictor.prediction.core import DRIFT_CORRECTIONS, END_EVENTS, LOAD_PRIOR_KEY, PredictorConfig  # noqa: E402
 
 THRESHOLD_V = 13.30
+
+
+def cutoff_of(pack: str, params) -> float:
+    """The runtime's cut-off of ``pack`` (V): the Temi returns to its charger at 13.30 V; the Ranger's node runs to
+    its params' pack minimum (``cutoff_voltage_v: 0`` in its node file)."""
+    return THRESHOLD_V if pack == "temi" else float(params.pack_info["min_voltage_v"])
 #: The counter told the charge day 2 delivers to the threshold: remaining Ah / mean current so far.
 ORACLE = "counter, true charge to the end"
 
 
 def run_seed(seed: int, load_prior: str, work: Path, instrument: str = far.INSTRUMENT,
-             drift_correction: str = "full", end_event: str = "peak") -> dict:
+             drift_correction: str = "full", end_event: str = "peak", pack: str = "temi") -> dict:
     """Draw the truth of ``seed``, fit its day 1 with the CLI, score the predictor on its day 2."""
-    params = load_params(REPO / "params" / "temi.yaml")
+    params_path = REPO / "params" / far.PACKS[pack][0]
+    params = load_params(params_path)
+    cutoff_v = cutoff_of(pack, params)
     truth = far.draw_truth(params, np.random.default_rng(1000 + seed))
     truth_params = params.with_values(pybamm_values(params, truth)[0])
-    fit_day, _, _ = far.day(truth_params, 2 * seed + 1, None, "temi", instrument)
-    test_day, _, _ = far.day(truth_params, 2 * seed + 2, 4.0, "temi", instrument)
-    below = np.flatnonzero(test_day.voltage_v <= THRESHOLD_V)
+    fit_day, _, _ = far.day(truth_params, 2 * seed + 1, None, pack, instrument)
+    test_day, _, _ = far.day(truth_params, 2 * seed + 2, far.PACKS[pack][2], pack, instrument)
+    below = np.flatnonzero(test_day.voltage_v <= cutoff_v)
     if not below.size:
-        return {"seed": seed, "skipped": f"day 2 never reaches {THRESHOLD_V} V"}
+        return {"seed": seed, "skipped": f"day 2 never reaches {cutoff_v:.2f} V"}
     fit_csv, test_csv, fit_yaml = work / f"s{seed}_day1.csv", work / f"s{seed}_day2.csv", work / f"fit{seed}.yaml"
     far.write_day_csv(test_day, test_csv, int(below[0]) + 1)
     if not fit_yaml.exists():  # a kept fit (--work) is the same day's: score it again, do not fit again
         far.write_day_csv(fit_day, fit_csv)
-        far.fit_with_cli(REPO / "params" / "temi.yaml", fit_csv, fit_yaml)
+        far.fit_with_cli(params_path, fit_csv, fit_yaml)
     fitted = load_params(fit_yaml)
     if load_prior == "power":
         operating = {k: v for k, v in fitted.operating.items() if k != LOAD_PRIOR_KEY}
         fitted = replace(fitted, operating=operating)
     test_rec = load_recording(test_csv)
     # the counter told the charge the day will actually deliver (an oracle): what remains is its load forecast
-    oracle_ah = charge_to_end_ah(fitted, test_rec, THRESHOLD_V)
-    config = PredictorConfig(params_file=str(fit_yaml), cutoff_voltage_v=THRESHOLD_V, drift_correction=drift_correction,
+    oracle_ah = charge_to_end_ah(fitted, test_rec, cutoff_v)
+    config = PredictorConfig(params_file=str(fit_yaml), cutoff_voltage_v=cutoff_v, drift_correction=drift_correction,
                              end_event=end_event)
-    result = evaluate_recording(fitted, test_rec, cutoff_v=THRESHOLD_V, capacities_ah={ORACLE: oracle_ah}, config=config)
+    result = evaluate_recording(fitted, test_rec, cutoff_v=cutoff_v, capacities_ah={ORACLE: oracle_ah}, config=config)
     errors = [(c.predicted_s, c.true_remaining_s) for c in result.checkpoints]
     late = [(c.predicted_s, c.true_remaining_s) for c in result.checkpoints if c.fraction >= 0.3 - 1e-9]
     over_half = sum(1 for p, t in late if not abs(p - t) <= 0.5 * t)
@@ -96,6 +108,9 @@ def run_seed(seed: int, load_prior: str, work: Path, instrument: str = far.INSTR
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", nargs="+", type=int, default=[60])
+    ap.add_argument("--pack", choices=("temi", "ranger"), default="temi",
+                    help="temi (to 13.30 V, day 2 from 4.0 V per cell) or ranger (to its params' 45.00 V, day 2 from "
+                         "3.33 V per cell, its far-truth days of longest routes)")
     ap.add_argument("--load-prior", choices=("params", "power"), default="params")
     ap.add_argument("--instrument", choices=far.INSTRUMENTS, default=far.INSTRUMENT)
     ap.add_argument("--drift-correction", choices=DRIFT_CORRECTIONS, default=PredictorConfig.drift_correction,
@@ -109,7 +124,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
-        rows = [run_seed(s, args.load_prior, work, args.instrument, args.drift_correction, args.end_event)
+        rows = [run_seed(s, args.load_prior, work, args.instrument, args.drift_correction, args.end_event, args.pack)
                 for s in args.seeds]
     scored = [r for r in rows if "summary" in r]
     pooled = [abs(e) for r in scored for e in r["errors_min"]]
