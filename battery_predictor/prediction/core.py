@@ -151,9 +151,9 @@ class PredictorConfig:
         at that charge; ``"auto"`` (default): ``"sampled"`` where the windows resolve the load's states (the
         cycle's heavy windows come in runs of :data:`RESOLVED_STATE_S` and :data:`RESOLVED_STATE_WINDOWS` windows
         or more on average), ``"peak"`` where the load changes within a window or two (a drive cycle: its
-        sub-window spikes end the discharge, and futures of window means would miss them). The futures run at most every :data:`SAMPLED_REFRESH_S` of
-        pack-state time; in between an answer keeps the last one's place between the peak-load and the
-        average-load crossings.
+        sub-window spikes end the discharge, and futures of window means would miss them). The futures run at
+        most every :data:`SAMPLED_REFRESH_S` of pack-state time; in between an answer keeps the last one's place
+        between the peak-load and the average-load crossings.
     thermal_forecast : str
         ``"auto"`` (default): when the params carry a lumped thermal cell that the engine runs, the runtime
         forecast starts the cells at the latest measured temperature and integrates it with that cell's heat
