@@ -16,13 +16,13 @@ remaining Ah / mean current so far), so that what remains of its error is the fo
 routes at random payloads with standstills, day 2 from rest at 3.33 V per cell, cut-off the node's (the params'
 pack minimum, 45.00 V).
 
-``--load-prior power`` removes the fitted params' ``operating.load_prior_power_fraction`` before scoring:
-the predictor's ``load_model auto`` then assumes a constant power until the day's windows decide, as
-before 2026-11-28.
+``--load-prior power`` removes the fitted params' ``operating.load_prior_power_fraction`` before scoring: the
+predictor's ``load_model auto`` then assumes a constant power until the day's windows decide (the package's
+prior). ``--load-prior current`` sets it to 0: a constant current until the day decides.
 
 Run::
 
-    nice .venv/bin/python benchmarks/runtime_far_truth.py --seeds 60 61 62 [--pack temi|ranger] [--load-prior params|power]
+    nice .venv/bin/python benchmarks/runtime_far_truth.py --seeds 60 61 62 [--pack temi|ranger] [--load-prior params|power|current]
         [--instrument paper|5s] [--drift-correction auto|full|smallest] [--end-event auto|peak|sampled] [--work DIR] [--json]
 """
 
@@ -84,8 +84,10 @@ def run_seed(seed: int, load_prior: str, work: Path, instrument: str = far.INSTR
         far.write_day_csv(fit_day, fit_csv)
         far.fit_with_cli(params_path, fit_csv, fit_yaml)
     fitted = load_params(fit_yaml)
-    if load_prior == "power":
+    if load_prior in ("power", "current"):
         operating = {k: v for k, v in fitted.operating.items() if k != LOAD_PRIOR_KEY}
+        if load_prior == "current":
+            operating[LOAD_PRIOR_KEY] = 0.0
         fitted = replace(fitted, operating=operating)
     test_rec = load_recording(test_csv)
     # the counter told the charge the day will actually deliver (an oracle): what remains is its load forecast
@@ -111,7 +113,9 @@ def main() -> None:
     ap.add_argument("--pack", choices=("temi", "ranger"), default="temi",
                     help="temi (to 13.30 V, day 2 from 4.0 V per cell) or ranger (to its params' 45.00 V, day 2 from "
                          "3.33 V per cell, its far-truth days of longest routes)")
-    ap.add_argument("--load-prior", choices=("params", "power"), default="params")
+    ap.add_argument("--load-prior", choices=("params", "power", "current"), default="params",
+                    help="the load kind the predictor assumes until the day decides: the fitted params' "
+                         "operating.load_prior_power_fraction (params), a constant power (power) or current (current)")
     ap.add_argument("--instrument", choices=far.INSTRUMENTS, default=far.INSTRUMENT)
     ap.add_argument("--drift-correction", choices=DRIFT_CORRECTIONS, default=PredictorConfig.drift_correction,
                     help="the predictor's drift_correction (node parameter; default: the node's default)")

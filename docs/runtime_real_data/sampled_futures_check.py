@@ -15,11 +15,12 @@ as ``evaluate-runtime`` feeds them; at 30 % .. 90 % of the discharge it prints
 
 Run from the repository::
 
-    nice .venv/bin/python docs/runtime_real_data/sampled_futures_check.py W 220 221 222
+    nice .venv/bin/python docs/runtime_real_data/sampled_futures_check.py W 220 221 222 [--cutoff-v 45.0]
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 from pathlib import Path
@@ -38,13 +39,13 @@ THRESHOLD_V = 13.30
 SHIPPED = runtime.sampled_end_s
 
 
-def check_day(work: Path, seed: int) -> list[float]:
-    """Print one day's checkpoints; return their PIT values."""
+def check_day(work: Path, seed: int, cutoff_v: float = THRESHOLD_V) -> list[float]:
+    """Print one day's checkpoints to ``cutoff_v`` (V); return their PIT values."""
     fit = work / f"fit{seed}.yaml"
     params = load_params(fit)
     win = Windows.of(load_recording(work / f"s{seed}_day2.csv"))
-    discharge = find_discharge(win, THRESHOLD_V, start_current_a=nominal_capacity_ah(params) / 100.0, end_margin_v=0.5 * params.series)
-    core = PredictorCore(PredictorConfig(params_file=str(fit), cutoff_voltage_v=THRESHOLD_V, end_event="sampled"),
+    discharge = find_discharge(win, cutoff_v, start_current_a=nominal_capacity_ah(params) / 100.0, end_margin_v=0.5 * params.series)
+    core = PredictorCore(PredictorConfig(params_file=str(fit), cutoff_voltage_v=cutoff_v, end_event="sampled"),
                          params=params)
     seen: dict = {}
 
@@ -73,7 +74,7 @@ def check_day(work: Path, seed: int) -> list[float]:
                 continue
             ahead = [(5.0, float(c)) for c in win.current_a[k:]] + [(5.0, float(win.current_a[-1]))] * 200
             run = seen["runner"].run(seen["start"], ahead, seen["temperature_k"])
-            known_s = runtime.time_to_voltage_s(run.time_s, run.pack_voltage_v, THRESHOLD_V)
+            known_s = runtime.time_to_voltage_s(run.time_s, run.pack_voltage_v, cutoff_v)
             pit = float(np.mean(seen["ends"] < truth_s))
             pits.append(pit)
             print(f"  {fraction:.1f}: truth {truth_s / 60:6.1f}  answer {answer.remaining_s / 60:6.1f}  known load "
@@ -84,11 +85,16 @@ def check_day(work: Path, seed: int) -> list[float]:
 
 
 def main() -> None:
-    work, seeds = Path(sys.argv[1]), [int(s) for s in sys.argv[2:]]
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("work", type=Path)
+    ap.add_argument("seeds", nargs="+", type=int)
+    ap.add_argument("--cutoff-v", type=float, default=THRESHOLD_V,
+                    help="the days' cut-off, V (13.30, the Temi's; 45.0 for `runtime_far_truth.py --pack ranger` days)")
+    args = ap.parse_args()
     day_means = []
-    for seed in seeds:
+    for seed in args.seeds:
         print(f"seed {seed}")
-        pits = check_day(work, seed)
+        pits = check_day(args.work, seed, args.cutoff_v)
         if pits:
             day_means.append(float(np.mean(pits)))
     if day_means:
