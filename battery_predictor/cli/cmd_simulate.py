@@ -74,11 +74,13 @@ def _score(params: PackParams, recs: Sequence[Recording], sim: PackSimulator,
            initial_state: str) -> tuple[list[dict[str, Any]], list[PackSimResult]]:
     """Simulate every recording from its start and score it: one row per recording and the simulations.
 
-    Each row has ``r2_mod``, ``rmse_mV``, the measured and simulated runtime (s; the simulated one
-    is the time to the recording's lowest voltage, None when the run never reaches it) and the
-    initial OCV used (V, None with the params' initial state).
+    Each row has ``r2_mod``, ``rmse_mV``, the measured and simulated runtime (s: the times at which the
+    recording and the run first reach the recording's lowest voltage; the simulated one None when the run
+    never reaches it) and the initial OCV used (V, None with the params' initial state).
     """
     from dataclasses import replace
+
+    import numpy as np
 
     from battery_predictor.fitting.cost import r2_mod, rmse_v
     from battery_predictor.fitting.problem import loaded_start_ocv_v, request_for_recording, starts_at_rest
@@ -102,8 +104,11 @@ def _score(params: PackParams, recs: Sequence[Recording], sim: PackSimulator,
             # as the fit scores it: Eq. 1-2's end handling only for a recording that ends at its cut-off
             "r2_mod": r2_mod(t, rec.voltage_v, res.time_s, res.pack_voltage_v, ends_at_cutoff(rec)),
             "rmse_mV": 1e3 * rmse_v(t, rec.voltage_v, res.time_s, res.pack_voltage_v),
-            "runtime_s_measured": float(rec.duration_s),
+            # the same event in both: a recording that rests after its end (a drive cycle's last 300 s) is not
+            # measured to its last sample
+            "runtime_s_measured": float(t[int(np.argmin(rec.voltage_v))]),
             "runtime_s_simulated": t_sim,
+            "end_voltage_v": u_end,
             "initial_ocv_v": req.initial_pack_ocv_v,
         })
         results.append(res)
@@ -119,6 +124,7 @@ def _summary(rows: list[dict[str, Any]], results: list[PackSimResult], seconds: 
         "rmse_mV": sum(r["rmse_mV"] for r in rows) / len(rows),
         "runtime_s_measured": rows[0]["runtime_s_measured"],
         "runtime_s_simulated": rows[0]["runtime_s_simulated"],
+        "end_voltage_v": rows[0]["end_voltage_v"],
         "per_file": rows,
     }
     out.pop("data", None)
@@ -134,8 +140,8 @@ def _print_summary(out: dict[str, Any], rows: list[dict[str, Any]], simulator: s
     """The human-readable lines: one per recording, the simulator and timing, the engine's fallback, the plot."""
     for r in rows:
         ts = r["runtime_s_simulated"]
-        print(f"{r['data']}: R2_mod {r['r2_mod']:.4f}, RMSE {r['rmse_mV']:.1f} mV, runtime measured "
-              f"{r['runtime_s_measured'] / 60:.1f} min, simulated "
+        print(f"{r['data']}: R2_mod {r['r2_mod']:.4f}, RMSE {r['rmse_mV']:.1f} mV, runtime to its lowest "
+              f"{r['end_voltage_v']:.3f} V measured {r['runtime_s_measured'] / 60:.1f} min, simulated "
               f"{'n/a' if ts is None else f'{ts / 60:.1f} min'}")
     engine = f", engine stepping {1e3 * out['engine_seconds']:.1f} ms" if out["engine_seconds"] is not None else ""
     print(f"({simulator} simulator, {out['thermal']} cell, {out['seconds']:.1f} s{engine})")

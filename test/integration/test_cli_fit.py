@@ -57,6 +57,11 @@ def test_simulate_json_reports_score_and_runtimes(train_csv):
     assert set(obj) >= {"r2_mod", "rmse_mV", "runtime_s_measured", "runtime_s_simulated", "seconds"}
     assert obj["runtime_s_measured"] > 3600
     assert -5 < obj["r2_mod"] <= 1
+    # measured and simulated are the same event: the first time at the recording's lowest voltage
+    data = np.loadtxt(train_csv, delimiter=",", skiprows=1)
+    lowest = int(np.argmin(data[:, 1]))
+    assert obj["end_voltage_v"] == pytest.approx(data[lowest, 1], abs=1e-6)
+    assert obj["runtime_s_measured"] == pytest.approx(data[lowest, 0] - data[0, 0], abs=1e-6)
 
 
 def test_screen_json_lists_relevant_parameters():
