@@ -579,7 +579,7 @@ class PredictorCore:
         (stamps in s, currents in A, ``window_s`` their length in s)."""
         if self.config.end_event != "auto":
             return self.config.end_event
-        run_s = heavy_run_s(stamps_s, currents_a, HEAVY_WINDOW_QUANTILE)
+        run_s = heavy_run_s(stamps_s, currents_a, HEAVY_WINDOW_QUANTILE, window_s)
         return "sampled" if run_s >= max(RESOLVED_STATE_S, RESOLVED_STATE_WINDOWS * window_s) else "peak"
 
     def _temperature(self, temperature_k: float) -> float:

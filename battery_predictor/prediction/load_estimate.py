@@ -200,7 +200,8 @@ class LoadEstimator:
         return float(np.quantile(np.fromiter(values, float), min(q, 1.0)))
 
 
-def heavy_run_s(stamps_s: npt.ArrayLike, currents_a: npt.ArrayLike, quantile: float) -> float:
+def heavy_run_s(stamps_s: npt.ArrayLike, currents_a: npt.ArrayLike, quantile: float,
+                window_s: float | None = None) -> float:
     """Mean duration (s) of the runs of consecutive heavy windows: at or above ``quantile`` of the discharge
     windows and above their median.
 
@@ -214,6 +215,8 @@ def heavy_run_s(stamps_s: npt.ArrayLike, currents_a: npt.ArrayLike, quantile: fl
         Window stamps (s) and mean currents (A, positive = discharge), in time order.
     quantile : float
         Quantile (0 .. 1) of the discharge windows (> 0 A) that makes a window heavy.
+    window_s : float, optional
+        The windows' length, s, when the caller has it (default: the median step of ``stamps_s``).
 
     Returns
     -------
@@ -225,7 +228,7 @@ def heavy_run_s(stamps_s: npt.ArrayLike, currents_a: npt.ArrayLike, quantile: fl
     discharge = i[i > 0.0]
     if t.size != i.size or discharge.size < 2:
         return math.nan
-    window_s = float(np.median(np.diff(t)))
+    window_s = float(np.median(np.diff(t))) if window_s is None else float(window_s)
     if not (math.isfinite(window_s) and window_s > 0.0):
         return math.nan
     level = float(np.quantile(discharge, min(max(quantile, 0.0), 1.0)))
