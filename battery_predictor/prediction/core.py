@@ -138,7 +138,8 @@ class PredictorConfig:
     drift_correction : str
         What a carried state that left ``state_tolerance_v_per_cell`` is moved to: ``"full"`` (a fresh calibration
         onto the measured voltage), ``"smallest"`` (a calibration that leaves half the tolerance on the side the
-        state left: the smallest correction consistent with the measurement), or ``"auto"`` (default):
+        state left: the smallest correction consistent with the measurement; never against that side, see
+        :data:`KEPT_DRIFT_TOLERANCES`), or ``"auto"`` (default):
         ``"smallest"`` where the OCVs within the tolerance of the state's span more than :data:`FLAT_OCV_SOC_SPAN` of
         the capacity, ``"full"`` elsewhere (and where the model gives no OCV). Where the OCV is flat
         (LiFePO4's plateau) a voltage the model misses by the tolerance is a large part of the charge and says
@@ -205,6 +206,10 @@ DRIFT_CORRECTIONS = ("auto", "full", "smallest")
 #: tolerance span more than this share of the capacity (:func:`~.uncertainty.ocv_band_soc_span`; shipped NMC params:
 #: 0.1-0.18 between 10 and 90 % SOC; LiFePO4: 0.45-0.85 on its plateaus, 0.2-0.3 at their ends).
 FLAT_OCV_SOC_SPAN = 0.3
+#: A ``"smallest"`` drift correction that would move the state of charge against the carried state's residual
+#: keeps the carried state while its residual is within this many state tolerances; beyond, the state is calibrated
+#: onto the measurement (the voltage has the last word).
+KEPT_DRIFT_TOLERANCES = 2.0
 #: Where the runtime of a load with peaks ends (``PredictorConfig.end_event``).
 END_EVENTS = ("auto", "peak", "sampled")
 #: ``end_event "auto"`` takes ``"sampled"`` where the cycle's heavy windows (at or above this quantile of its
@@ -302,6 +307,7 @@ class PredictorCore:
         #: Why the next calibration must start afresh ("" = it may continue the last one).
         self._recalibrate_reason = ""
         self._drift_v = math.nan  # residual of the last carried state that left the tolerance band (V)
+        self._drifted: Calibration | None = None  # that carried state
         self.events: deque[tuple[float, str]] = deque(maxlen=100)
         self.model_error = ""
         self.params: PackParams | None = None
@@ -485,12 +491,34 @@ class PredictorCore:
                 if propagated is not None:
                     return propagated
                 if math.isfinite(self._drift_v) and self._corrects_smallest(cached[2].soc, temperature_k):
-                    # the carried state left the tolerance band: move it back just inside, on the side it left
-                    # (half the band), not onto the measurement: where the OCV is flat (LiFePO4's plateau) a
-                    # voltage the model misses by the tolerance is a large part of the charge
-                    target = math.copysign(0.5 * self.state_tolerance_v, self._drift_v)
-                    return self._calibrate_fresh(hist, temperature_k, heating, target_residual_v=target)
+                    return self._correct_smallest(cached, hist, temperature_k, heating)
             return self._calibrate_fresh(hist, temperature_k, heating)
+
+    def _correct_smallest(self, cached: tuple[float, float, Calibration], hist: list[tuple[float, float, float, float]],
+                          temperature_k: float, heating: TemperatureAhead | None) -> Calibration:
+        """The drifted state moved back just inside the tolerance band, on the side it left.
+
+        Half the band, not onto the measurement: where the OCV is flat (LiFePO4's plateau) a voltage the model
+        misses by the tolerance is a large part of the charge. A calibration that moves the state of charge
+        against its residual's side (less charge where the model's voltage is below the measurement, or more
+        where it is above) answers a different question than the one that triggered it: the window's fit trades
+        the carried particles' gradients for charge, or its mean voltage lags a falling measurement. Then the
+        carried state is kept, with its residual, which keeps routes rejected until the state agrees with the
+        measurement again; up to :data:`KEPT_DRIFT_TOLERANCES` tolerances, beyond which the state is calibrated
+        onto the measurement.
+        """
+        drift_v, carried = self._drift_v, self._drifted
+        target = math.copysign(0.5 * self.state_tolerance_v, drift_v)
+        fresh = self._calibrate_fresh(hist, temperature_k, heating, target_residual_v=target)
+        if carried is None or fresh.clipped or (fresh.soc - carried.soc) * drift_v <= 0.0:
+            return fresh
+        if abs(drift_v) > KEPT_DRIFT_TOLERANCES * self.state_tolerance_v:
+            return self._calibrate_fresh(hist, temperature_k, heating)
+        with self._lock:
+            self.events.append((hist[-1][0], f"recalibration moved the SOC {carried.soc:.3f} -> {fresh.soc:.3f}, "
+                                              f"against the residual {drift_v:+.2f} V: carried state kept"))
+        self._cals[heating is not None] = (hist[-1][0], cached[1], carried)
+        return carried
 
     def _corrects_smallest(self, soc: float, temperature_k: float) -> bool:
         """Whether a drifted state at ``soc`` moves just inside the tolerance band (``drift_correction``)."""
@@ -522,8 +550,8 @@ class PredictorCore:
     def _propagate(self, cached: tuple[float, float, Calibration], hist: list[tuple[float, float, float, float]],
                    temperature_k: float, heating: TemperatureAhead | None = None) -> Calibration | None:
         """The cached state carried to now by the measured current, or None when it left the measurement
-        (then ``_drift_v`` holds its residual, else NaN)."""
-        self._drift_v = math.nan
+        (then ``_drift_v`` holds its residual and ``_drifted`` that state, else NaN and None)."""
+        self._drift_v, self._drifted = math.nan, None
         newer = [h for h in hist if h[0] >= cached[0]]
         if len(newer) < 2:
             return None
@@ -543,14 +571,14 @@ class PredictorCore:
         # carried from above full, a model voltage below the measurement is what clipped the state: the
         # measurement asks for more charge than the model holds, charge counting is the bound
         still_above = cached[2].clipped == "above_full" and residual < -self.state_tolerance_v
+        cal = Calibration(self._runner().soc_of(run.final_state), residual, "above_full" if still_above else "",
+                          run.final_state, residual)
         if abs(residual) > self.state_tolerance_v and not still_above:
             with self._lock:
                 self.events.append((hist[-1][0], f"propagated state {residual:+.2f} V off the measurement: "
                                                   "recalibrated"))
-            self._drift_v = residual
+            self._drift_v, self._drifted = residual, cal
             return None
-        cal = Calibration(self._runner().soc_of(run.final_state), residual, "above_full" if still_above else "",
-                          run.final_state, residual)
         self._cals[heating is not None] = (hist[-1][0], cached[1], cal)
         return cal
 

@@ -4,6 +4,7 @@ message contract holds, numeric failures are invalid answers with a reason."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -174,22 +175,34 @@ def test_a_state_above_the_models_full_is_carried_by_charge_not_reset_to_full():
     assert first.soc - later.soc == pytest.approx(drawn_soc, rel=0.05)
 
 
+def falling_until_corrected(core: PredictorCore, voltage_v: float, current_a: float, step_v: float):
+    """A measurement falling faster than the charge drawn explains, until the carried state (above it) is moved;
+    returns that calibration and the state of charge of every window."""
+    last = feed(core, 0.0, 900.0, voltage_v, current_a)
+    socs = [core.calibration(T_K).soc]
+    v, t = voltage_v, last
+    while True:
+        v -= step_v
+        t += 5.0
+        core.update_state(t, v, current_a, T_K)
+        cal = core.calibration(T_K)
+        socs.append(cal.soc)
+        latest = [why for stamp, why in core.events if stamp == t]
+        if latest and "propagated state" in latest[-1]:  # moved, not kept against a contrary recalibration
+            return cal, socs
+        assert t < last + 600.0, "the drift was never corrected"
+
+
 @pytest.mark.parametrize("correction", ["full", "smallest"])
 def test_a_drifted_state_moves_onto_the_measurement_or_just_inside_the_tolerance(correction):
     # "smallest" leaves half the tolerance on the side the carried state left (a flat OCV: the voltage the model
-    # misses is a large part of the charge); "full" calibrates onto the measured voltage
+    # misses is a large part of the charge), never moving the state against it; "full" calibrates onto the
+    # measured voltage
     core = PredictorCore(PredictorConfig(params_file=str(PARAMS / "temi.yaml"), drift_correction=correction))
-    last = feed(core, 0.0, 900.0, 15.2, 2.0)
-    core.calibration(T_K)
-    v, cal, t = 15.2, None, last
-    while not any("propagated state" in why for _, why in core.events):
-        v -= 0.03  # the measurement falls faster than the charge drawn explains: the model's state is above it
-        t += 5.0
-        core.update_state(t, v, 2.0, T_K)
-        cal = core.calibration(T_K)
-        assert t < last + 600.0, "the drift was never noticed"
+    cal, socs = falling_until_corrected(core, 15.2, 2.0, 0.03)
     expected = 0.5 * core.state_tolerance_v if correction == "smallest" else 0.0
     assert cal.residual_v == pytest.approx(expected, abs=0.01)
+    assert np.all(np.diff(socs) <= 1e-9), "a falling measurement never raised the state of charge"
 
 
 @pytest.mark.parametrize(("params_file", "voltage_v", "current_a", "step_v", "smallest"),
@@ -200,17 +213,71 @@ def test_auto_drift_correction_is_smallest_only_where_the_ocv_is_flat(params_fil
     # Ranger's plateau the tolerance spans most of the capacity: just inside the band
     core = PredictorCore(PredictorConfig(params_file=str(PARAMS / params_file)))
     assert core.config.drift_correction == "auto"
-    last = feed(core, 0.0, 900.0, voltage_v, current_a)
-    core.calibration(T_K)
-    v, cal, t = voltage_v, None, last
-    while not any("propagated state" in why for _, why in core.events):
-        v -= step_v
-        t += 5.0
-        core.update_state(t, v, current_a, T_K)
-        cal = core.calibration(T_K)
-        assert t < last + 600.0, "the drift was never noticed"
+    cal, socs = falling_until_corrected(core, voltage_v, current_a, step_v)
     expected = 0.5 * core.state_tolerance_v if smallest else 0.0
     assert cal.residual_v == pytest.approx(expected, abs=0.003 * core.params.series)
+    assert np.all(np.diff(socs) <= 1e-9), "a falling measurement never raised the state of charge"
+
+
+@pytest.mark.parametrize("fresh_soc_step", [-0.3, +0.1])
+def test_a_smallest_correction_never_moves_the_state_against_its_residual(monkeypatch, fresh_soc_step):
+    # the measurement rises above the carried state's voltage (it asks for more charge); a recalibration that
+    # lowers the SOC instead (a window's fit trading the carried gradients for charge) is refused: the carried state
+    # stays, with its residual, and routes wait; one that raises it is taken
+    core = PredictorCore(PredictorConfig(params_file=str(PARAMS / "ranger_mini.yaml"), drift_correction="smallest"))
+    last = feed(core, 0.0, 900.0, 49.0, 3.0)
+    core.calibration(T_K)
+    fresh_calibration = core._calibrate_fresh
+
+    def stepped(hist, temperature_k, heating=None, *, target_residual_v=0.0):
+        cal = fresh_calibration(hist, temperature_k, heating, target_residual_v=target_residual_v)
+        if target_residual_v == 0.0:
+            return cal
+        return replace(cal, soc=core._drifted.soc + fresh_soc_step)
+
+    monkeypatch.setattr(core, "_calibrate_fresh", stepped)
+    v, cal, t = 49.0, None, last
+    while not any("propagated state" in why for _, why in core.events):
+        v += 0.05
+        t += 5.0
+        core.update_state(t, v, 3.0, T_K)
+        cal = core.calibration(T_K)
+        assert t < last + 600.0, "the drift was never noticed"
+    kept = any("against the residual" in why for _, why in core.events)
+    assert kept == (fresh_soc_step < 0)
+    if kept:
+        assert cal.latest_residual_v < -core.state_tolerance_v  # the carried state, its residual unchanged
+        decision = core.can_accept_route(longest_route(0).sections, t + 1)
+        assert not decision.accepted and "state uncertain" in decision.reason
+    else:
+        assert cal.residual_v == pytest.approx(-0.5 * core.state_tolerance_v, abs=0.003 * core.params.series)
+
+
+def test_a_carried_state_is_kept_against_a_contrary_recalibration_only_within_twice_the_tolerance(monkeypatch):
+    core = PredictorCore(PredictorConfig(params_file=str(PARAMS / "ranger_mini.yaml"), drift_correction="smallest"))
+    last = feed(core, 0.0, 900.0, 49.0, 3.0)
+    core.calibration(T_K)
+    fresh_calibration = core._calibrate_fresh
+
+    def contrary(hist, temperature_k, heating=None, *, target_residual_v=0.0):
+        cal = fresh_calibration(hist, temperature_k, heating, target_residual_v=target_residual_v)
+        return cal if target_residual_v == 0.0 else replace(cal, soc=core._drifted.soc - 0.3)
+
+    monkeypatch.setattr(core, "_calibrate_fresh", contrary)
+    v, t, kept = 49.0, last, 0
+    while True:
+        v += 0.1
+        t += 5.0
+        core.update_state(t, v, 3.0, T_K)
+        cal = core.calibration(T_K)
+        latest = [why for stamp, why in core.events if stamp == t]
+        kept += bool(latest) and "against the residual" in latest[-1]
+        if latest and "propagated state" in latest[-1]:
+            break
+        assert t < last + 600.0, "the drift was never corrected"
+    assert kept > 0
+    assert float(latest[-1].split()[2]) < -2.0 * core.state_tolerance_v  # "propagated state -1.52 V off ..."
+    assert abs(cal.residual_v) < 0.003 * core.params.series  # onto the measurement
 
 
 def test_an_unknown_drift_correction_is_refused():
