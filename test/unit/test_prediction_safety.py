@@ -219,11 +219,9 @@ def test_auto_drift_correction_is_smallest_only_where_the_ocv_is_flat(params_fil
     assert np.all(np.diff(socs) <= 1e-9), "a falling measurement never raised the state of charge"
 
 
-@pytest.mark.parametrize("fresh_soc_step", [-0.3, +0.1])
-def test_a_smallest_correction_never_moves_the_state_against_its_residual(monkeypatch, fresh_soc_step):
-    # the measurement rises above the carried state's voltage (it asks for more charge); a recalibration that
-    # lowers the SOC instead (a window's fit trading the carried gradients for charge) is refused: the carried state
-    # stays, with its residual, and routes wait; one that raises it is taken
+def ranger_with_stepped_corrections(monkeypatch, soc_step: float) -> tuple[PredictorCore, float]:
+    """A Ranger core calibrated on 15 min at 49.0 V / 3 A whose drift corrections (the calibrations with a target
+    residual) put the state of charge ``soc_step`` from the drifted carried state's; returns it and the last stamp."""
     core = PredictorCore(PredictorConfig(params_file=str(PARAMS / "ranger_mini.yaml"), drift_correction="smallest"))
     last = feed(core, 0.0, 900.0, 49.0, 3.0)
     core.calibration(T_K)
@@ -231,11 +229,18 @@ def test_a_smallest_correction_never_moves_the_state_against_its_residual(monkey
 
     def stepped(hist, temperature_k, heating=None, *, target_residual_v=0.0):
         cal = fresh_calibration(hist, temperature_k, heating, target_residual_v=target_residual_v)
-        if target_residual_v == 0.0:
-            return cal
-        return replace(cal, soc=core._drifted.soc + fresh_soc_step)
+        return cal if target_residual_v == 0.0 else replace(cal, soc=core._drifted.soc + soc_step)
 
     monkeypatch.setattr(core, "_calibrate_fresh", stepped)
+    return core, last
+
+
+@pytest.mark.parametrize("fresh_soc_step", [-0.3, +0.1])
+def test_a_smallest_correction_never_moves_the_state_against_its_residual(monkeypatch, fresh_soc_step):
+    # the measurement rises above the carried state's voltage (it asks for more charge); a recalibration that
+    # lowers the SOC instead (a window's fit trading the carried gradients for charge) is refused: the carried state
+    # stays, with its residual, and routes wait; one that raises it is taken
+    core, last = ranger_with_stepped_corrections(monkeypatch, fresh_soc_step)
     v, cal, t = 49.0, None, last
     while not any("propagated state" in why for _, why in core.events):
         v += 0.05
@@ -254,16 +259,7 @@ def test_a_smallest_correction_never_moves_the_state_against_its_residual(monkey
 
 
 def test_a_carried_state_is_kept_against_a_contrary_recalibration_only_within_twice_the_tolerance(monkeypatch):
-    core = PredictorCore(PredictorConfig(params_file=str(PARAMS / "ranger_mini.yaml"), drift_correction="smallest"))
-    last = feed(core, 0.0, 900.0, 49.0, 3.0)
-    core.calibration(T_K)
-    fresh_calibration = core._calibrate_fresh
-
-    def contrary(hist, temperature_k, heating=None, *, target_residual_v=0.0):
-        cal = fresh_calibration(hist, temperature_k, heating, target_residual_v=target_residual_v)
-        return cal if target_residual_v == 0.0 else replace(cal, soc=core._drifted.soc - 0.3)
-
-    monkeypatch.setattr(core, "_calibrate_fresh", contrary)
+    core, last = ranger_with_stepped_corrections(monkeypatch, -0.3)
     v, t, kept = 49.0, last, 0
     while True:
         v += 0.1
