@@ -13,7 +13,7 @@ PYTEST_ARGS ?=
 # process, as a bare `pytest` or a single test (`.venv/bin/python -m pytest test/unit/test_x.py`) does.
 PYTEST_XDIST ?= -n auto --dist loadfile --no-loadscope-reorder
 
-.PHONY: setup demo test test-fast test-services lint bags benchmarks clean
+.PHONY: setup demo test test-fast test-extended test-services lint bags benchmarks clean
 
 setup: $(STAMP)
 
@@ -62,6 +62,10 @@ test-fast: setup
 	$(VENV)/bin/ruff check battery_predictor test benchmarks
 	$(VPY) -m mypy
 	$(VPY) -m pytest $(PYTEST_XDIST) test/unit $(PYTEST_ARGS)
+
+# The checks marked `extended` (held-out, too slow for make test's 30 min on 2 cores), and only them.
+test-extended: setup
+	$(VPY) -m pytest $(PYTEST_XDIST) --extended -m extended $(PYTEST_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check battery_predictor test benchmarks

@@ -38,6 +38,20 @@ SYNTHETIC_TRUTH = {
 }
 
 
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--extended", action="store_true",
+                     help="also run the tests marked extended (held-out checks too slow for make test)")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if config.getoption("--extended"):
+        return
+    skip = pytest.mark.skip(reason="extended check: run with --extended (make test-extended)")
+    for item in items:
+        if "extended" in item.keywords:
+            item.add_marker(skip)
+
+
 def _synthesize(params, seed: int) -> Recording:
     """A liionpack discharge of the Temi pack under a (3x heavier) usage profile, 5 s samples + noise."""
     from battery_predictor.profiles.temi import generate_usage_profile

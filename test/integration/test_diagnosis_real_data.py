@@ -55,6 +55,7 @@ PANASONIC_OCV = Path(__file__).resolve().parents[2] / "docs" / "runtime_real_dat
 
 
 @pytest.mark.slow
+@pytest.mark.extended  # 6 min alone; the LG M50 10 degC test above keeps a measured cold diagnosis in make test
 @pytest.mark.skipif(not PANASONIC.is_dir(), reason="measured data not available (../shared/data)")
 def test_panasonic_minus10degC_drive_cycles_fitted_at_25degC_name_temperature(process_workers_args):
     # the issue's own real case (named current_offset once): -10 degC HWFET + US06 against 25 degC HWFET + LA92,
