@@ -306,8 +306,7 @@ class PredictorCore:
         self._load = self._fresh_load_estimator()
         #: Why the next calibration must start afresh ("" = it may continue the last one).
         self._recalibrate_reason = ""
-        self._drift_v = math.nan  # residual of the last carried state that left the tolerance band (V)
-        self._drifted: Calibration | None = None  # that carried state
+        self._drifted: Calibration | None = None  # the last carried state that left the tolerance band
         self.events: deque[tuple[float, str]] = deque(maxlen=100)
         self.model_error = ""
         self.params: PackParams | None = None
@@ -490,12 +489,13 @@ class PredictorCore:
                 propagated = self._propagate(cached, hist, temperature_k, heating)
                 if propagated is not None:
                     return propagated
-                if math.isfinite(self._drift_v) and self._corrects_smallest(cached[2].soc, temperature_k):
-                    return self._correct_smallest(cached, hist, temperature_k, heating)
+                if self._drifted is not None and self._corrects_smallest(cached[2].soc, temperature_k):
+                    return self._correct_smallest(cached, self._drifted, hist, temperature_k, heating)
             return self._calibrate_fresh(hist, temperature_k, heating)
 
-    def _correct_smallest(self, cached: tuple[float, float, Calibration], hist: list[tuple[float, float, float, float]],
-                          temperature_k: float, heating: TemperatureAhead | None) -> Calibration:
+    def _correct_smallest(self, cached: tuple[float, float, Calibration], carried: Calibration,
+                          hist: list[tuple[float, float, float, float]], temperature_k: float,
+                          heating: TemperatureAhead | None) -> Calibration:
         """The drifted state moved back just inside the tolerance band, on the side it left.
 
         Half the band, not onto the measurement: where the OCV is flat (LiFePO4's plateau) a voltage the model
@@ -507,10 +507,10 @@ class PredictorCore:
         measurement again; up to :data:`KEPT_DRIFT_TOLERANCES` tolerances, beyond which the state is calibrated
         onto the measurement.
         """
-        drift_v, carried = self._drift_v, self._drifted
+        drift_v = carried.latest_residual_v
         target = math.copysign(0.5 * self.state_tolerance_v, drift_v)
         fresh = self._calibrate_fresh(hist, temperature_k, heating, target_residual_v=target)
-        if carried is None or fresh.clipped or (fresh.soc - carried.soc) * drift_v <= 0.0:
+        if fresh.clipped or (fresh.soc - carried.soc) * drift_v <= 0.0:
             return fresh
         if abs(drift_v) > KEPT_DRIFT_TOLERANCES * self.state_tolerance_v:
             return self._calibrate_fresh(hist, temperature_k, heating)
@@ -550,8 +550,8 @@ class PredictorCore:
     def _propagate(self, cached: tuple[float, float, Calibration], hist: list[tuple[float, float, float, float]],
                    temperature_k: float, heating: TemperatureAhead | None = None) -> Calibration | None:
         """The cached state carried to now by the measured current, or None when it left the measurement
-        (then ``_drift_v`` holds its residual and ``_drifted`` that state, else NaN and None)."""
-        self._drift_v, self._drifted = math.nan, None
+        (then ``_drifted`` holds that state, with its residual, else None)."""
+        self._drifted = None
         newer = [h for h in hist if h[0] >= cached[0]]
         if len(newer) < 2:
             return None
@@ -577,7 +577,7 @@ class PredictorCore:
             with self._lock:
                 self.events.append((hist[-1][0], f"propagated state {residual:+.2f} V off the measurement: "
                                                   "recalibrated"))
-            self._drift_v, self._drifted = residual, cal
+            self._drifted = cal
             return None
         self._cals[heating is not None] = (hist[-1][0], cached[1], cal)
         return cal
