@@ -14,7 +14,6 @@ from battery_predictor.profiles.temi import generate_usage_profile
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
 from battery_predictor.simulation.base import PackSimResult
 from battery_predictor.simulation.fast import FastPackSimulator
-from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 PARAMS = Path(__file__).resolve().parents[2] / "params"
 
@@ -86,14 +85,6 @@ def test_engine_matches_liionpack_on_ranger_longest_route():
     assert "engine_fallback" not in engine.extra
     assert rms_v <= 0.005
     assert engine.termination == ref.termination == "end_of_load"
-
-
-def test_equivalent_resistance_of_uniform_strings_is_series_over_parallel():
-    # with negligible busbars the interconnect adds series * R_c / parallel (+ terminal)
-    r = equivalent_network_resistance_ohm(4, 6, 1e-9, 0.09, 1e-9)
-    assert r == pytest.approx(4 * 0.09 / 6, rel=1e-4)
-    # busbar resistance only adds
-    assert equivalent_network_resistance_ohm(4, 6, 1e-3, 0.09, 1e-9) > r
 
 
 def test_fast_simulator_reuses_built_model_when_only_input_parameters_change():
