@@ -22,7 +22,7 @@ import numpy as np
 from battery_predictor.errors import BatteryPredictorError
 from battery_predictor.params import PackParams, load_params
 from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, history_segments
-from battery_predictor.prediction.load_estimate import LoadEstimator, LoadKind, heavy_run_s
+from battery_predictor.prediction.load_estimate import LoadEstimate, LoadEstimator, LoadKind, heavy_run_s
 from battery_predictor.prediction.pack_model import PackModel, pack_model
 from battery_predictor.prediction.priority import RoutePriority, YieldingRunner
 from battery_predictor.prediction.route import RouteDecision, rejected
@@ -241,6 +241,55 @@ def _load_text(current_a: float, power_w: float | None, kind: LoadKind, now_a: f
     if kind.exponent >= 1.0:
         return f"{power_w:.1f} W (now {now_a:.2f} A)"
     return f"{current_a:.2f} A / {power_w:.1f} W, load exponent {kind.exponent:.2f} (now {now_a:.2f} A)"
+
+
+@dataclass(frozen=True)
+class _LoadView:
+    """The present cycle's load as one runtime answer uses it (A, W, s; read once under the core's lock)."""
+
+    load: LoadEstimate
+    peak_a: float
+    kind: LoadKind
+    cycle: int
+    sampled_fraction: float | None
+    history_a: np.ndarray | None  # the cycle's window currents when the futures run again, else None
+    window_s: float
+    end_event: str
+    power_w: float | None  # the mean power when the load model ahead is (partly) a power, else None
+
+
+def _runtime_refusal(stamp_s: float, voltage_v: float, cutoff_v: float, load: LoadEstimate,
+                     temperature_k: float) -> RuntimeStatus | None:
+    """The invalid answer for a pack at its cut-off, charging, or without a discharge load (else None)."""
+    if voltage_v <= cutoff_v:
+        return _invalid_runtime(stamp_s, cutoff_v, STATUS_BELOW_CUTOFF,
+                                f"pack voltage {voltage_v:.2f} V is at or below the cut-off {cutoff_v:.2f} V",
+                                remaining_s=0.0, temperature_k=temperature_k)
+    if load.charging:
+        return _invalid_runtime(stamp_s, cutoff_v, STATUS_CHARGING, f"charging at {-load.charging_current_a:.2f} A",
+                                temperature_k=temperature_k)
+    avg = load.mean_current_a
+    if not (math.isfinite(avg) and avg > 0):
+        what = "no discharge measured yet" if not math.isfinite(avg) else f"net load {avg:.3f} A"
+        return _invalid_runtime(stamp_s, cutoff_v, STATUS_NO_LOAD,
+                                f"no discharge load in the present cycle to predict from ({what})",
+                                temperature_k=temperature_k)
+    return None
+
+
+def _peaks_text(pred: RuntimePrediction, peak_a: float) -> str:
+    """How a runtime reason names the end event: the peaks it assumed, or the resampled load."""
+    if pred.limited_by == "peak_cutoff":
+        return f" with {peak_a:.2f} A peaks"
+    return " with the cycle's load resampled" if pred.limited_by == "sampled_cutoff" else ""
+
+
+def _heating_text(ahead: TemperatureAhead, pred: RuntimePrediction) -> str:
+    """The self-heating note of a runtime reason (empty when the temperature ahead is held)."""
+    if not ahead.self_heating:
+        return ""
+    end_k = pred.end_temperature_k
+    return f" ({ahead.note}; {end_k - 273.15:.1f} degC at the end)" if math.isfinite(end_k) else f" ({ahead.note})"
 
 
 @dataclass(frozen=True)
@@ -634,7 +683,23 @@ class PredictorCore:
             return _invalid_runtime(now_s, cutoff, status, reason)
         stamp, v, i, t_k = state
         temp = self._temperature(t_k)
-        r_ohm = self._resistance(temp) if self.config.load_model == "auto" else math.nan
+        view = self._load_view(stamp, temp)
+        refusal = _runtime_refusal(stamp, v, cutoff, view.load, temp)
+        if refusal is not None:
+            return refusal
+        try:
+            ahead, pred = self._forecast(v, i, temp, view)
+        except BatteryPredictorError as exc:
+            return _invalid_runtime(stamp, cutoff, STATUS_MODEL_FAILED, f"model failed: {exc}", temperature_k=temp)
+        placed = sampled_fraction_of(pred) if view.sampled_fraction is None else None
+        if placed is not None:
+            with self._lock:
+                self._sampled = (stamp, view.cycle, placed)
+        return self._runtime_answer(stamp, v, temp, view, ahead, pred)
+
+    def _load_view(self, stamp_s: float, temperature_k: float) -> _LoadView:
+        """The present cycle's load as the runtime answer at ``stamp_s`` (s) uses it, read under the lock."""
+        r_ohm = self._resistance(temperature_k) if self.config.load_model == "auto" else math.nan
         with self._lock:
             load = self._load.estimate()
             peak = self._load.quantile_a(self.config.peak_current_quantile,
@@ -643,7 +708,7 @@ class PredictorCore:
             cycle = self._load.sessions_ended
             reused = self._sampled
             fraction = (reused[2] if reused is not None and reused[1] == cycle
-                        and 0.0 <= stamp - reused[0] < SAMPLED_REFRESH_S else None)
+                        and 0.0 <= stamp_s - reused[0] < SAMPLED_REFRESH_S else None)
             windows = self.config.end_event == "auto" or (self.config.end_event == "sampled" and fraction is None)
             history_a = np.fromiter(self._load.currents, float) if windows else np.empty(0)
             stamps = np.fromiter(self._load.stamps, float) if windows else np.empty(0)
@@ -651,72 +716,60 @@ class PredictorCore:
         end_event = self._end_event(stamps, history_a, window_s)
         # the futures need the cycle's windows only when they run again
         resample = end_event == "sampled" and fraction is None
-        if v <= cutoff:
-            return _invalid_runtime(stamp, cutoff, STATUS_BELOW_CUTOFF,
-                                    f"pack voltage {v:.2f} V is at or below the cut-off {cutoff:.2f} V",
-                                    remaining_s=0.0, temperature_k=temp)
-        if load.charging:
-            return _invalid_runtime(stamp, cutoff, STATUS_CHARGING, f"charging at {-load.charging_current_a:.2f} A",
-                                    temperature_k=temp)
-        avg = load.mean_current_a
-        if not (math.isfinite(avg) and avg > 0):
-            what = "no discharge measured yet" if not math.isfinite(avg) else f"net load {avg:.3f} A"
-            return _invalid_runtime(stamp, cutoff, STATUS_NO_LOAD,
-                                    f"no discharge load in the present cycle to predict from ({what})",
-                                    temperature_k=temp)
         mean_power_w = load.mean_power_w if kind.exponent > 0 else math.nan
         power = mean_power_w if math.isfinite(mean_power_w) and mean_power_w > 0 else None
-        try:
-            ahead = self.temperature_ahead(temp)
-            cal = self.calibration(temp, ahead)
-            if ahead.self_heating:  # the cells start at the measured temperature and warm (or cool) from there
-                started = ahead.start(self._runner(), cal.start)
-                cal = replace(cal, state=started) if not isinstance(started, float) else cal
-            pred = predict_remaining_runtime(self._background_runner(), v, i, ahead.run_temperature_k, avg, cutoff,
-                                             calibration=cal,
-                                             peak_current_a=peak if math.isfinite(peak) else None,
-                                             peak_duration_s=self._peak_duration_s(), average_power_w=power,
-                                             load_exponent=kind.exponent, end_event=end_event,
-                                             load_history_a=history_a if resample else None,
-                                             history_window_s=min(max(window_s, 0.1), 60.0),
-                                             sampled_fraction=fraction)
-        except BatteryPredictorError as exc:
-            return _invalid_runtime(stamp, cutoff, STATUS_MODEL_FAILED, f"model failed: {exc}", temperature_k=temp)
-        placed = sampled_fraction_of(pred) if fraction is None else None
-        if placed is not None:
-            with self._lock:
-                self._sampled = (stamp, cycle, placed)
+        return _LoadView(load, peak, kind, cycle, fraction, history_a if resample else None, window_s, end_event,
+                         power)
+
+    def _forecast(self, voltage_v: float, current_a: float, temperature_k: float,
+                  view: _LoadView) -> tuple[TemperatureAhead, RuntimePrediction]:
+        """The temperature ahead and the runtime prediction from a fresh calibration (raises on model failure)."""
+        ahead = self.temperature_ahead(temperature_k)
+        cal = self.calibration(temperature_k, ahead)
+        if ahead.self_heating:  # the cells start at the measured temperature and warm (or cool) from there
+            started = ahead.start(self._runner(), cal.start)
+            cal = replace(cal, state=started) if not isinstance(started, float) else cal
+        peak = view.peak_a
+        pred = predict_remaining_runtime(self._background_runner(), voltage_v, current_a, ahead.run_temperature_k,
+                                         view.load.mean_current_a, self.cutoff_voltage_v, calibration=cal,
+                                         peak_current_a=peak if math.isfinite(peak) else None,
+                                         peak_duration_s=self._peak_duration_s(), average_power_w=view.power_w,
+                                         load_exponent=view.kind.exponent, end_event=view.end_event,
+                                         load_history_a=view.history_a,
+                                         history_window_s=min(max(view.window_s, 0.1), 60.0),
+                                         sampled_fraction=view.sampled_fraction)
+        return ahead, pred
+
+    def _runtime_answer(self, stamp_s: float, voltage_v: float, temperature_k: float, view: _LoadView,
+                        ahead: TemperatureAhead, pred: RuntimePrediction) -> RuntimeStatus:
+        """The published answer of ``pred``: SOC, P10..P90, status and the reason a reader sees."""
+        load, kind, cutoff = view.load, view.kind, self.cutoff_voltage_v
+        avg = load.mean_current_a
         soc, soc_note = published_soc(pred.calibration.soc)
         notes = [n for n in (soc_note, f"calibration {pred.calibration.clipped}" if pred.calibration.clipped else "")
                  if n]
         undecided = (0.0 if kind.exponent >= 0.5 else 1.0) if self.config.load_model == "auto" and not kind.decided \
             else None
         mean_power = load.mean_power_w if math.isfinite(load.mean_power_w) and load.mean_power_w > 0 else 0.0
-        spread = self._runtime_spread(pred, LoadAhead(avg, mean_power, kind.exponent if power else 0.0, math.nan,
-                                                      undecided), v)
+        spread = self._runtime_spread(pred, LoadAhead(avg, mean_power, kind.exponent if view.power_w else 0.0,
+                                                      math.nan, undecided), voltage_v)
         note = "; " + "; ".join(notes) if notes else ""
-        peaks = (f" with {peak:.2f} A peaks" if pred.limited_by == "peak_cutoff"
-                 else " with the cycle's load resampled" if pred.limited_by == "sampled_cutoff" else "")
-        load_text = _load_text(avg, power, kind, pred.assumed_current_a)
+        load_text = _load_text(avg, view.power_w, kind, pred.assumed_current_a)
         if pred.limited_by == "horizon":
-            return RuntimeStatus(stamp, pred.remaining_s, avg, temp, soc, cutoff, False, STATUS_BEYOND_HORIZON,
-                                 f"more than {pred.remaining_s / 60:.0f} min at {load_text} (the longest horizon "
-                                 f"simulated){note}")
+            return RuntimeStatus(stamp_s, pred.remaining_s, avg, temperature_k, soc, cutoff, False,
+                                 STATUS_BEYOND_HORIZON, f"more than {pred.remaining_s / 60:.0f} min at {load_text} "
+                                 f"(the longest horizon simulated){note}")
         if pred.limited_by == "peak_cutoff" and pred.remaining_s == 0.0:
-            note = f"; a {peak:.2f} A load peak now would reach the cut-off{note}"
+            note = f"; a {view.peak_a:.2f} A load peak now would reach the cut-off{note}"
         p10, p90 = interval(pred.remaining_s, *spread.total()) if spread is not None else (math.nan, math.nan)
         band = f" (P10..P90 {p10 / 60:.1f}..{p90 / 60:.1f} min)" if spread is not None else ""
         until = (f"a cell reaches its {self.params.cell_lower_cutoff_v:.2f} V cut-off (pack above {cutoff:.2f} V)"
                  if pred.cell_limited and self.params is not None else f"{cutoff:.2f} V")
-        heating = ""
-        if ahead.self_heating:
-            end_k = pred.end_temperature_k
-            heating = (f" ({ahead.note}; {end_k - 273.15:.1f} degC at the end)" if math.isfinite(end_k)
-                       else f" ({ahead.note})")
-        reason = (f"{pred.remaining_s / 60:.1f} min{band} at {load_text}{peaks}, {temp - 273.15:.1f} degC{heating} "
-                  f"until {until} ({pred.limited_by}){note}")
-        return RuntimeStatus(stamp, pred.remaining_s, avg, temp, soc, cutoff, True, STATUS_OK, reason, p10, p90,
-                             spread)
+        reason = (f"{pred.remaining_s / 60:.1f} min{band} at {load_text}{_peaks_text(pred, view.peak_a)}, "
+                  f"{temperature_k - 273.15:.1f} degC{_heating_text(ahead, pred)} until {until} "
+                  f"({pred.limited_by}){note}")
+        return RuntimeStatus(stamp_s, pred.remaining_s, avg, temperature_k, soc, cutoff, True, STATUS_OK, reason,
+                             p10, p90, spread)
 
     def state_voltage_sigma_v(self, calibration: Calibration | None = None) -> float:
         """Pack-voltage error of a calibrated state, V: its residual, at least a sensor's resolution.
