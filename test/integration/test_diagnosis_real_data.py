@@ -23,6 +23,7 @@ CLI = str(Path(sys.executable).parent / "battery-predictor")
 
 
 @pytest.mark.slow
+@pytest.mark.extended  # 2-3 min alone, the slowest of make test; the hidden-effect diagnoses stay there
 @pytest.mark.skipif(not DATA.is_dir(), reason="measured data not available (../shared/data)")
 def test_lgm50_10degC_discharges_name_temperature(process_workers_args):
     refs = [str(DATA / f"cc_T25C_{r}.csv") for r in ("0p1C", "0p5C", "1C", "2C")]
@@ -55,7 +56,7 @@ PANASONIC_OCV = Path(__file__).resolve().parents[2] / "docs" / "runtime_real_dat
 
 
 @pytest.mark.slow
-@pytest.mark.extended  # 6 min alone; the LG M50 10 degC test above keeps a measured cold diagnosis in make test
+@pytest.mark.extended  # 6 min alone
 @pytest.mark.skipif(not PANASONIC.is_dir(), reason="measured data not available (../shared/data)")
 def test_panasonic_minus10degC_drive_cycles_fitted_at_25degC_name_temperature(process_workers_args):
     # the issue's own real case (named current_offset once): -10 degC HWFET + US06 against 25 degC HWFET + LA92,
