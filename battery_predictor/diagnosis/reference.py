@@ -21,7 +21,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -198,33 +198,14 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
     result = identify(problem, evaluations=max(int(budget), 2), seed=seed, progress=show)
     best = problem.score(result.coordinates)
     evaluations = result.evaluations
-    cutoff_ends = any(ends_at_cutoff(r) for r in references)
-    if cutoff_ends and name == "engine":
-        # the end padding assumes the recording stopped at its cut-off; the data test it
-        free, f_result, f_best = _identify(params, references, simulator, space, budget, seed, show,
-                                           "without the end padding", cutoff_ends=False)
-        evaluations += f_result.evaluations
-        padded_mv, free_mv = _rms(best.rmse_mv), _rms(f_best.rmse_mv)
-        cutoff_ends = not separably_better(padded_mv, free_mv, noise_mv)
-        _log(progress, f"reference fit without the end padding (the references ending at their minimum voltage "
-                       f"taken as not stopped at their cut-off): RMSE {free_mv:.1f} mV (padded {padded_mv:.1f} mV): "
-                       f"{'padding kept' if cutoff_ends else 'separably better: the references did not stop at their cut-off'}")
-        if not cutoff_ends:
-            problem, result, best = free, f_result, f_best
     extra: list[str] = []
     if name == "engine":
-        transport = _transport_fit(params, references, simulator, result.coordinates, budget, seed, show,
-                                   cutoff_ends=problem.cutoff_ends)
-        if transport is not None:
-            t_problem, t_result, t_best = transport
-            evaluations += t_result.evaluations
-            basic_mv, t_mv = _rms(best.rmse_mv), _rms(t_best.rmse_mv)
-            kept = separably_better(basic_mv, t_mv, noise_mv)
-            _log(progress, f"reference fit with the particle diffusivities: RMSE {t_mv:.1f} mV (without {basic_mv:.1f} "
-                           f"mV): {'kept' if kept else 'not separably better, not kept'}")
-            if kept:
-                problem, space, result, best = t_problem, t_problem.space, t_result, t_best
-                extra = list(TRANSPORT_COORDINATES)
+        fit = _Fit(problem, result, best)
+        fit, n_padding = _padding_choice(params, references, simulator, fit, budget, seed, show, noise_mv, progress)
+        fit, n_transport, extra = _transport_choice(params, references, simulator, fit, budget, seed, show,
+                                                    noise_mv, progress)
+        problem, result, best = fit
+        space, evaluations = problem.space, evaluations + n_padding + n_transport
     fitted = reachable_soc_window(params.with_values(best.values[0]), progress)
     states = [result.coordinates[c.name] for c in space if c.recording is not None]
     info = ReferenceFit(values={k: float(v) for k, v in result.coordinates.items() if not k.startswith("initial_ocv")},
@@ -237,6 +218,54 @@ def identify_reference(params: PackParams, references: Sequence[Recording], budg
     _log(progress, f"reference fit: RMSE {initial_rmse:.1f} -> {info.rmse_mV:.1f} mV, R2_mod {info.r2_mod:.4f} "
                    f"({info.evaluations} evaluations, {info.seconds:.0f} s)")
     return fitted, info
+
+
+class _Fit(NamedTuple):
+    """One identification of the references: its problem, result and score."""
+
+    problem: IdentificationProblem
+    result: IdentificationResult
+    best: CandidateScore
+
+
+def _padding_choice(params: PackParams, references: Sequence[Recording], simulator: PackSimulator, fit: _Fit,
+                    budget: int, seed: int, show: Callable[[str, int, float], None], noise_mv: float,
+                    progress: Callable[[str], None] | None) -> tuple[_Fit, int]:
+    """The end padding kept, or dropped when an identification without it fits separably better.
+
+    The padding assumes a reference that ends at its minimum voltage stopped at its cut-off; the data test
+    it. Returns the kept fit and the evaluations spent (0 when no reference ends at its minimum voltage).
+    """
+    if not any(ends_at_cutoff(r) for r in references):
+        return fit, 0
+    free = _Fit(*_identify(params, references, simulator, fit.problem.space, budget, seed, show,
+                           "without the end padding", cutoff_ends=False))
+    padded_mv, free_mv = _rms(fit.best.rmse_mv), _rms(free.best.rmse_mv)
+    kept = not separably_better(padded_mv, free_mv, noise_mv)
+    _log(progress, f"reference fit without the end padding (the references ending at their minimum voltage "
+                   f"taken as not stopped at their cut-off): RMSE {free_mv:.1f} mV (padded {padded_mv:.1f} mV): "
+                   f"{'padding kept' if kept else 'separably better: the references did not stop at their cut-off'}")
+    return (fit if kept else free), free.result.evaluations
+
+
+def _transport_choice(params: PackParams, references: Sequence[Recording], simulator: PackSimulator, fit: _Fit,
+                      budget: int, seed: int, show: Callable[[str, int, float], None], noise_mv: float,
+                      progress: Callable[[str], None] | None) -> tuple[_Fit, int, list[str]]:
+    """The particle diffusivities searched as well, kept when that fits separably better.
+
+    Returns the kept fit, the evaluations spent and the coordinates it adds (empty when not kept).
+    """
+    transport = _transport_fit(params, references, simulator, fit.result.coordinates, budget, seed, show,
+                               cutoff_ends=fit.problem.cutoff_ends)
+    if transport is None:
+        return fit, 0, []
+    other = _Fit(*transport)
+    basic_mv, t_mv = _rms(fit.best.rmse_mv), _rms(other.best.rmse_mv)
+    kept = separably_better(basic_mv, t_mv, noise_mv)
+    _log(progress, f"reference fit with the particle diffusivities: RMSE {t_mv:.1f} mV (without {basic_mv:.1f} "
+                   f"mV): {'kept' if kept else 'not separably better, not kept'}")
+    return (other, other.result.evaluations, list(TRANSPORT_COORDINATES)) if kept else \
+        (fit, other.result.evaluations, [])
 
 
 def separably_better(basic_rmse_mv: float, other_rmse_mv: float, noise_mv: float) -> bool:
