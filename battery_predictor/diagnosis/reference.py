@@ -264,8 +264,9 @@ def _transport_choice(params: PackParams, references: Sequence[Recording], simul
     kept = separably_better(basic_mv, t_mv, noise_mv)
     _log(progress, f"reference fit with the particle diffusivities: RMSE {t_mv:.1f} mV (without {basic_mv:.1f} "
                    f"mV): {'kept' if kept else 'not separably better, not kept'}")
-    return (other, other.result.evaluations, list(TRANSPORT_COORDINATES)) if kept else \
-        (fit, other.result.evaluations, [])
+    if kept:
+        return other, other.result.evaluations, list(TRANSPORT_COORDINATES)
+    return fit, other.result.evaluations, []
 
 
 def separably_better(basic_rmse_mv: float, other_rmse_mv: float, noise_mv: float) -> bool:
