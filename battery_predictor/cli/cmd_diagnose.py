@@ -52,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--causes", nargs="+", choices=EXTENSION_NAMES, default=None,
                    help="candidate causes to try (default all)")
     p.add_argument("--trim", action="store_true",
-                   help="trim every recording to its discharge (up to its minimum voltage); default keeps rests "
+                   help="trim every recording to the discharge that holds its minimum voltage; default keeps rests "
                         "and charge phases, which separate some causes")
     p.add_argument("--resample", type=float, default=None, metavar="SECONDS",
                    help="average every recording over time windows of SECONDS (dense data such as 1 s drive cycles)")

@@ -34,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="one pack per file (CSV or rosbag2 MCAP), named by the file's stem")
     f.add_argument("--pack", action="append", default=[], metavar="NAME=FILE[,FILE...]",
                    help="a pack with its own name and one or more files (repeatable)")
-    f.add_argument("--no-trim", action="store_true", help="keep samples after the minimum voltage (rests, recharge)")
+    f.add_argument("--no-trim", action="store_true", help="keep the samples after the end of the discharge (rests, recharges)")
     add_input_check_arguments(f)
     f.add_argument("--resample", type=float, default=None, metavar="SECONDS",
                    help="average the data over windows of this many seconds first")

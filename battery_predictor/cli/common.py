@@ -117,7 +117,7 @@ def add_data_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", nargs="+", required=True, metavar="FILE",
                         help="CSV (time_s, voltage_V, current_A > 0 = discharge[, temperature_C]) or rosbag2 MCAP")
     parser.add_argument("--no-trim", action="store_true",
-                        help="keep samples after the minimum voltage (rests, recharge)")
+                        help="keep the samples after the end of the discharge (rests, recharges)")
     add_input_check_arguments(parser)
 
 
