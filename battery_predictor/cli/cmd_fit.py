@@ -48,10 +48,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="identify: share of the budget spent in TPE before the refinement (default 0.25)")
     p.add_argument("--starts", type=int, default=None,
                    help="identify: refinements from the best distinct TPE candidates (default 3)")
-    p.add_argument("--coordinates", nargs="+", default=(), metavar="NAME",
+    p.add_argument("--coordinates", nargs="+", default=None, metavar="NAME",
                    help="identify: optional coordinates to search as well (negative_diffusivity_m2_s, "
                         "positive_diffusivity_m2_s, negative_kinetic_scale, positive_kinetic_scale; with the "
-                        "hysteresis extension hysteresis_relaxation_rate_s, hysteresis_activation_energy_j_mol)")
+                        "hysteresis extension hysteresis_relaxation_rate_s, hysteresis_activation_energy_j_mol), or "
+                        "'none'. Default: both particle diffusivities where the params carry a measured OCV "
+                        "(battery-predictor ocv), none otherwise")
     p.add_argument("--ignore-group-voltages", action="store_true",
                    help="identify: fit the pack voltage only, also when the data carry series-group voltages "
                         "(group<k>_voltage_V) and the params use cell_imbalance (default: the weakest group's "

@@ -17,6 +17,7 @@ from battery_predictor.cli.common import (
     prepared_data,
     print_json,
 )
+from battery_predictor.errors import InputDataError
 from battery_predictor.ocp import ocp_origin
 
 if TYPE_CHECKING:
@@ -65,9 +66,10 @@ def run_identify(args: argparse.Namespace) -> int:
         with_thermal(load_params(args.params), getattr(args, "thermal", "params"))))
     thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
     recs = prepared_data(args, params, command="fit")
+    extra = _optional_coordinates(params, args.coordinates)
     warned: set[str] = set()
     fits = identify_structures(params, recs, simulator_named(args.simulator),
-                               lambda p: _space(p, recs, tuple(args.coordinates), warned),
+                               lambda p: _space(p, recs, extra, warned),
                                group_voltages=not getattr(args, "ignore_group_voltages", False),
                                ohmic=getattr(args, "ohmic_structure", False),
                                progress=_progress_printer(not args.no_progress and not args.json),
@@ -119,6 +121,23 @@ def run_identify(args: argparse.Namespace) -> int:
         print(f"engine fallback: {engine_fallback(best.results)}")
     print(f"wrote {out} and {plot_path}")
     return 0
+
+
+def _optional_coordinates(params: PackParams, requested: Sequence[str] | None) -> tuple[str, ...]:
+    """``--coordinates``: the names given (``none``: no optional coordinate), else the params' default (said on
+    stderr when there is one)."""
+    from battery_predictor.fitting.identifiable import default_optional_coordinates
+
+    if requested is not None:
+        names = tuple(requested)
+        if "none" in names and len(names) > 1:
+            raise InputDataError("--coordinates none cannot be combined with coordinate names")
+        return () if names == ("none",) else names
+    extra = default_optional_coordinates(params)
+    if extra:
+        sys.stderr.write(f"fit: the params carry a measured OCV: searching {' and '.join(extra)} as well "
+                         "(--coordinates none: not)\n")
+    return extra
 
 
 def _space(params: PackParams, recs: Sequence[Recording], extra: tuple[str, ...],

@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from battery_predictor.errors import BatteryPredictorError
+from battery_predictor.fitting.identifiable import TRANSPORT_COORDINATES
 from battery_predictor.fitting.identification import DEFAULT_EVALUATIONS
 from battery_predictor.params import PackParams, cached_parameter_values
 from battery_predictor.recording import Recording, ends_at_cutoff
@@ -53,11 +54,10 @@ FALLBACK_BUDGET = 150
 #: another chemistry's OCPs (docs/identification.md). Only the excess over the noise counts (white
 #: noise no model can fit, :func:`~battery_predictor.diagnosis.decision.excess_mv`).
 POOR_EXCESS_MV_PER_CELL = 40.0
-#: The particle diffusivities, searched in a second identification that starts from the first one's
-#: result (:func:`identify_reference`). On a flat open-circuit voltage (LFP) the end of a working day
-#: is shaped by solid diffusion: a far-truth Ranger reference day (diffusivities x0.5-2 of the
-#: params') was fitted to 71.8 mV without them and 9.9 mV with them (docs/findings.md).
-TRANSPORT_COORDINATES = ("negative_diffusivity_m2_s", "positive_diffusivity_m2_s")
+# The particle diffusivities (TRANSPORT_COORDINATES) are searched in a second identification that starts from the
+# first one's result (identify_reference). On a flat open-circuit voltage (LFP) the end of a working day is shaped by
+# solid diffusion: a far-truth Ranger reference day (diffusivities x0.5-2 of the params') was fitted to 71.8 mV
+# without them and 9.9 mV with them (docs/findings.md).
 
 
 @dataclass

@@ -103,6 +103,9 @@ CORE_COORDINATES = ("negative_capacity_ah", "positive_capacity_ah", "negative_st
 NEGATIVE_STOICHIOMETRY_RANGE = (0.2, 0.999)
 OPTIONAL_COORDINATES = ("negative_diffusivity_m2_s", "positive_diffusivity_m2_s", "negative_kinetic_scale",
                         "positive_kinetic_scale", "hysteresis_relaxation_rate_s", "hysteresis_activation_energy_j_mol")
+#: Both particle diffusivities: the transport ``fit`` searches by default on params with a measured OCP
+#: (:func:`default_optional_coordinates`) and the diagnosis's reference fit where they fit separably better.
+TRANSPORT_COORDINATES = ("negative_diffusivity_m2_s", "positive_diffusivity_m2_s")
 _ELECTRODES = {"negative": "Negative", "positive": "Positive"}
 _DIFFUSIVITY_KEYS = {"negative_diffusivity_m2_s": "Negative particle diffusivity [m2.s-1]",
                      "positive_diffusivity_m2_s": "Positive particle diffusivity [m2.s-1]"}
@@ -264,6 +267,22 @@ def _cell_charge_drawn_ah(params: PackParams, recordings: Sequence[Recording]) -
         q = np.concatenate([[0.0], np.cumsum(rec.current_a[:-1] * dt) / 3600.0])
         out = max(out, float(q.max() - min(q.min(), 0.0)))
     return out / params.parallel
+
+
+def default_optional_coordinates(params: PackParams) -> tuple[str, ...]:
+    """The optional coordinates ``fit`` searches when none are asked for.
+
+    Both particle diffusivities (:data:`TRANSPORT_COORDINATES`) where the params carry a measured OCP
+    (``cell.ocp``, written by ``battery-predictor ocv``) and give both diffusivities as scalars; none otherwise.
+    With the cell's own open-circuit voltage the thermodynamics is measured, and what drive cycles determine
+    beyond the capacities, the stoichiometry and the series resistance is the particles' transport. With a
+    base set's OCPs (another chemistry's) the diffusivities take up the OCPs' error instead: on the Panasonic
+    18650PF they raise the fit's R2_mod and worsen the held-out runtime (docs/identification.md).
+    """
+    if not params.ocp:
+        return ()
+    shipped = shipped_coordinates(params)
+    return TRANSPORT_COORDINATES if all(name in shipped for name in TRANSPORT_COORDINATES) else ()
 
 
 def default_space(params: PackParams, recordings: Sequence[Recording] = (),
