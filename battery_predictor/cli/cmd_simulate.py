@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from battery_predictor.cli.common import (
@@ -35,8 +36,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="cell thermal model: as the params say (default; cell.options thermal), isothermal at the "
                         "data's temperature, or lumped (PyBaMM's lumped thermal cell self-heating from it)")
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto",
-                   help="initial state: params' concentrations or first measured voltage (default auto); a first "
-                        "voltage under load is corrected by the model's own drop at that current")
+                   help="initial state: params' concentrations or first measured voltage; default auto: with a "
+                        "fit's params, each data file of that fit from its fitted state and every other recording "
+                        "from its own first voltage, else as the params say; a first voltage under load is "
+                        "corrected by the model's own drop at that current")
     add_resample_arguments(p, "simulate")
     p.add_argument("--plot", default=None, help="write measured vs simulated voltage to this PNG")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -86,11 +89,17 @@ def _score(params: PackParams, recs: Sequence[Recording], sim: PackSimulator,
     from battery_predictor.fitting.problem import loaded_start_ocv_v, request_for_recording, starts_at_rest
     from battery_predictor.recording import ends_at_cutoff
 
+    fitted_ocv_v = _fitted_initial_ocvs_v(params) if initial_state == "auto" else {}
     rows: list[dict[str, Any]] = []
     results: list[PackSimResult] = []
     for rec in recs:
-        req = request_for_recording(params, rec, initial_state=initial_state, extend_s=0.5 * rec.duration_s)
-        if req.initial_pack_ocv_v is not None and not starts_at_rest(params, rec):
+        fitted = fitted_ocv_v.get(Path(str(rec.source)).name)
+        # a fit's params hold the state of its first data file: another recording starts from its own state
+        state = "voltage" if fitted_ocv_v and fitted is None else initial_state
+        req = request_for_recording(params, rec, initial_state=state, extend_s=0.5 * rec.duration_s)
+        if fitted is not None:
+            req = replace(req, initial_pack_ocv_v=fitted * params.series)
+        elif req.initial_pack_ocv_v is not None and not starts_at_rest(params, rec):
             # the first voltage of a recording that starts under load is not its OCV
             req = replace(req, initial_pack_ocv_v=loaded_start_ocv_v(params, rec, sim))
         res = sim.simulate(params, req)
@@ -113,6 +122,15 @@ def _score(params: PackParams, recs: Sequence[Recording], sim: PackSimulator,
         })
         results.append(res)
     return rows, results
+
+
+def _fitted_initial_ocvs_v(params: PackParams) -> dict[str, float]:
+    """The open-circuit cell voltage (V) each data file of the fit that wrote ``params`` started from, by file name
+    (``provenance.initial_ocv_v_per_file``); empty for params no identification wrote."""
+    per_file = params.provenance.get("initial_ocv_v_per_file") if isinstance(params.provenance, dict) else None
+    if not isinstance(per_file, dict):
+        return {}
+    return {str(name): float(v) for name, v in per_file.items() if isinstance(v, (int, float))}
 
 
 def _summary(rows: list[dict[str, Any]], results: list[PackSimResult], seconds: float,
