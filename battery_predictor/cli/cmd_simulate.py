@@ -79,7 +79,8 @@ def _score(params: PackParams, recs: Sequence[Recording], sim: PackSimulator,
 
     Each row has ``r2_mod``, ``rmse_mV``, the measured and simulated runtime (s: the times at which the
     recording and the run first reach the recording's lowest voltage; the simulated one None when the run
-    never reaches it) and the initial OCV used (V, None with the params' initial state).
+    never reaches it), where the recording's discharge ends (s; later than its lowest voltage when that fell in a
+    burst before) and the initial OCV used (V, None with the params' initial state).
     """
     from dataclasses import replace
 
@@ -117,6 +118,8 @@ def _score(params: PackParams, recs: Sequence[Recording], sim: PackSimulator,
             # measured to its last sample
             "runtime_s_measured": float(t[int(np.argmin(rec.voltage_v))]),
             "runtime_s_simulated": t_sim,
+            # where the recording's discharge ends (s): later than its lowest voltage when that fell in a burst before
+            "discharge_end_s_measured": float(t[-1]),
             "end_voltage_v": u_end,
             "initial_ocv_v": req.initial_pack_ocv_v,
         })
@@ -158,8 +161,10 @@ def _print_summary(out: dict[str, Any], rows: list[dict[str, Any]], simulator: s
     """The human-readable lines: one per recording, the simulator and timing, the engine's fallback, the plot."""
     for r in rows:
         ts = r["runtime_s_simulated"]
+        end_s = r["discharge_end_s_measured"]
+        ends_later = f" (its discharge ends at {end_s / 60:.1f} min)" if end_s - r["runtime_s_measured"] > 60.0 else ""
         print(f"{r['data']}: R2_mod {r['r2_mod']:.4f}, RMSE {r['rmse_mV']:.1f} mV, runtime to its lowest "
-              f"{r['end_voltage_v']:.3f} V measured {r['runtime_s_measured'] / 60:.1f} min, simulated "
+              f"{r['end_voltage_v']:.3f} V measured {r['runtime_s_measured'] / 60:.1f} min{ends_later}, simulated "
               f"{'n/a' if ts is None else f'{ts / 60:.1f} min'}")
     engine = f", engine stepping {1e3 * out['engine_seconds']:.1f} ms" if out["engine_seconds"] is not None else ""
     print(f"({simulator} simulator, {out['thermal']} cell, {out['seconds']:.1f} s{engine})")

@@ -27,6 +27,7 @@ def test_a_fit_s_data_file_starts_from_its_fitted_state_and_another_from_its_own
     assert rows[0]["initial_ocv_v"] == pytest.approx(3.95 * temi_params.series)
     assert rows[1]["initial_ocv_v"] == pytest.approx(15.9, abs=2e-3)
     assert rows[1]["r2_mod"] > 0.999  # its own state: the recording is the model's
+    assert rows[1]["discharge_end_s_measured"] == pytest.approx(unseen.relative_time_s[-1])
 
 
 def test_params_no_fit_wrote_keep_the_params_initial_state(temi_params):
