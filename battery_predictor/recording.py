@@ -225,6 +225,18 @@ def end_steepness(rec: Recording, charge_fraction: float = KNEE_CHARGE_FRACTION)
     return (before - float(u[-1])) / (charge_fraction * span)
 
 
+#: A sample discharges when its current exceeds this fraction of the recording's largest discharge current, and
+#: charges below minus that (rests, soaks and sensor offsets in between are neither).
+DISCHARGE_CURRENT_FRACTION = 0.01
+
+
+def discharge_threshold_a(current_a: Any) -> float:
+    """The current (A) beyond which a recording's samples discharge (or, below its negative, charge):
+    :data:`DISCHARGE_CURRENT_FRACTION` of its largest discharge current; 0 when it never discharges."""
+    i = np.asarray(current_a, dtype=float)
+    return DISCHARGE_CURRENT_FRACTION * max(float(np.max(i)), 0.0) if i.size else 0.0
+
+
 def ends_at_cutoff(rec: Recording) -> bool:
     """True when the recording ends at its minimum voltage while discharging, on the knee (its runtime is defined).
 

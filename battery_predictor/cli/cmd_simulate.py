@@ -130,7 +130,7 @@ def _score(params: PackParams, recs: Sequence[Recording], sim: PackSimulator,
 def _fitted_initial_ocvs_v(params: PackParams) -> dict[str, float]:
     """The open-circuit cell voltage (V) each data file of the fit that wrote ``params`` started from, by file name
     (``provenance.initial_ocv_v_per_file``); empty for params no identification wrote."""
-    per_file = params.provenance.get("initial_ocv_v_per_file") if isinstance(params.provenance, dict) else None
+    per_file = params.provenance.get("initial_ocv_v_per_file")
     if not isinstance(per_file, dict):
         return {}
     return {str(name): float(v) for name, v in per_file.items() if isinstance(v, (int, float))}

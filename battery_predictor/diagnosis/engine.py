@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from battery_predictor.errors import InputDataError, SimulationError
 from battery_predictor.params import INTERCONNECT_KEYS, PackParams, cached_parameter_values
-from battery_predictor.recording import Recording, ends_at_cutoff
+from battery_predictor.recording import Recording, discharge_threshold_a, ends_at_cutoff
 from battery_predictor.simulation import extensions as ext
 from battery_predictor.simulation.base import SimulationRequest
 from battery_predictor.simulation.cell_setup import (
@@ -166,23 +166,18 @@ def window_average(rec: Recording, period_s: float) -> Recording:
                      temperature_k=temp, source=rec.source, metadata=dict(rec.metadata))
 
 
-#: A sample counts as discharging when its current exceeds this fraction of the recording's largest
-#: discharge current (rests, soaks and sensor offsets below it add no discharge throughput).
-DISCHARGE_CURRENT_FRACTION = 0.01
-
-
 def discharge_throughput_ah(t_s: np.ndarray, current_a: np.ndarray) -> np.ndarray:
     """Charge discharged since the start at each sample (Ah, discharge only, zero-order hold).
 
-    Only currents above :data:`DISCHARGE_CURRENT_FRACTION` of the largest discharge current count:
-    rests, temperature soaks and recharges do not move it.
+    Only discharging samples count (:func:`~battery_predictor.recording.discharge_threshold_a`): rests,
+    temperature soaks and recharges do not move it.
     """
     t = np.asarray(t_s, dtype=float)
     i = np.asarray(current_a, dtype=float)
-    i_max = float(np.max(i)) if i.size else 0.0
-    if i_max <= 0.0:
+    threshold = discharge_threshold_a(i)
+    if threshold <= 0.0:
         return np.zeros(t.size)
-    i_dis = np.where(i > DISCHARGE_CURRENT_FRACTION * i_max, i, 0.0)
+    i_dis = np.where(i > threshold, i, 0.0)
     return np.concatenate([[0.0], np.cumsum(i_dis[:-1] * np.diff(t))]) / 3600.0
 
 
@@ -213,13 +208,13 @@ def without_trailing_rest(rec: Recording) -> Recording:
     discharge throughput is counted too (:func:`discharge_throughput_ah`).
     """
     i = np.asarray(rec.current_a, dtype=float)
-    i_max = float(np.max(i)) if i.size else 0.0
-    if i_max <= 0.0:
+    threshold = discharge_threshold_a(i)
+    if threshold <= 0.0:
         return rec
-    discharging = np.nonzero(i > DISCHARGE_CURRENT_FRACTION * i_max)[0]
+    discharging = np.nonzero(i > threshold)[0]
     last = int(discharging[-1]) if discharging.size else i.size - 1
     after = i[last + 1:]
-    if after.size == 0 or np.any(after < -DISCHARGE_CURRENT_FRACTION * i_max) or last < 9:
+    if after.size == 0 or np.any(after < -threshold) or last < 9:
         return rec
     return rec.slice_time(float(rec.time_s[0]), float(rec.time_s[last]))
 

@@ -12,7 +12,7 @@ from battery_predictor.errors import InputDataError, SimulationError
 from battery_predictor.fitting.cost import r2_mod, rmse_v
 from battery_predictor.fitting.identifiable import FULL_OCV_MARGIN_V, highest_start_ocv_v
 from battery_predictor.params import PackParams
-from battery_predictor.recording import Recording
+from battery_predictor.recording import Recording, discharge_threshold_a
 from battery_predictor.simulation.base import PackSimResult, PackSimulator, SimulationRequest
 from battery_predictor.simulation.extensions import current_offset_a
 from battery_predictor.simulation.load import StepLoad
@@ -27,8 +27,6 @@ REST_AVERAGE_S = 60.0
 #: A charge held this long (s) ends a recording's discharge (:func:`trim_to_discharge`); regenerative braking
 #: (the Panasonic drive cycles: at most about 15 s) and charging blips are shorter.
 CHARGE_SESSION_S = 60.0
-#: Currents within this fraction of a recording's largest |current| are rest for :func:`trim_to_discharge`.
-REST_CURRENT_FRACTION = 0.005
 
 
 def trim_to_discharge(rec: Recording) -> Recording:
@@ -39,8 +37,7 @@ def trim_to_discharge(rec: Recording) -> Recording:
     the rests and recharges after it are dropped, since the model is terminated at the cut-off as the
     experiment was. A bursty drive cycle's lowest voltage can come minutes before its end: the 25 degC US06
     of the shared Panasonic data reaches it in a 17 A burst and drives on for 5.4 min (0.21 Ah).
-    A sample discharges or charges when its current is beyond :data:`REST_CURRENT_FRACTION` of the
-    recording's largest |current|.
+    A sample discharges or charges as :func:`~battery_predictor.recording.discharge_threshold_a` says.
     """
     if len(rec.time_s) < 3:
         raise InputDataError(f"{rec.source}: too few samples ({len(rec.time_s)}) to simulate")
@@ -48,7 +45,7 @@ def trim_to_discharge(rec: Recording) -> Recording:
     if i_min < 2:
         raise InputDataError(f"{rec.source}: the minimum voltage is at the start; no discharge to fit")
     t, i = rec.time_s, np.asarray(rec.current_a, dtype=float)
-    threshold = REST_CURRENT_FRACTION * float(np.max(np.abs(i)))
+    threshold = discharge_threshold_a(i)
     stop = _first_charge_session(t, i < -threshold, i_min)
     discharging = np.nonzero(i[i_min:stop] > threshold)[0]
     last = i_min + int(discharging[-1]) if discharging.size else i_min
