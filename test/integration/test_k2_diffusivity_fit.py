@@ -29,6 +29,7 @@ def _run(*args: str) -> dict:
     return json.loads(proc.stdout)
 
 
+@pytest.mark.extended  # 70-100 s alone: make test's 30 min on 2 cores had no margin left
 def test_the_diffusivity_fit_reaches_the_issues_figure_at_20_degc_and_holds_at_30_to_50_degc(tmp_path):
     out = tmp_path / "k2.yaml"
     fit = _run("fit", "--params", str(START), "--data", str(DATA / "cc_discharge_T20C.csv"),

@@ -32,6 +32,7 @@ HELD_OUT = ("T25C_Cycle1", "T25C_US06", "T10C_Cycle1", "T10C_HWFET", "T10C_US06"
             "T00C_UDDS", "T00C_US06")
 
 
+@pytest.mark.extended  # 2-2.5 min alone: make test's 30 min on 2 cores had no margin left
 @pytest.mark.skipif(not DATA.is_dir(), reason="measured data not available (../shared/data)")
 def test_predictor_beats_the_best_counter_on_held_out_drive_cycles():
     params = load_params(FIT)
