@@ -428,26 +428,15 @@ def generate_usage_profile(
         config = load_usage_config(config)
     max_duration_s = _check_limit("max_duration_s", max_duration_s)
     max_charge_ah = _check_limit("max_charge_ah", max_charge_ah)
-    if max_points is not None:
-        if isinstance(max_points, bool) or not isinstance(max_points, int | np.integer) or max_points < 1:
-            raise ProfileError(f"temi profile: max_points is {max_points!r} (must be an integer >= 1)")
-        max_points = int(max_points)
+    max_points = _check_max_points(max_points)
     if max_duration_s is None and max_charge_ah is None and max_points is None:
         raise ProfileError("temi profile: give at least one of max_duration_s, max_charge_ah, max_points")
 
     rng = np.random.default_rng(seed)
-    p = np.array([config.probabilities[s] for s in STATES])
     states_parts, duration_parts, current_parts = [], [], []
     n_total, t_total, q_total = 0, 0.0, 0.0
     while True:
-        index = rng.choice(len(STATES), size=CHUNK_POINTS, p=p)
-        durations = np.empty(CHUNK_POINTS)
-        currents = np.empty(CHUNK_POINTS)
-        masks = [index == k for k in range(len(STATES))]
-        for k, state in enumerate(STATES):
-            durations[masks[k]] = config.duration_distribution(state).sample(int(masks[k].sum()), rng)
-        for k, state in enumerate(STATES):
-            currents[masks[k]] = config.current_distribution(state).sample(int(masks[k].sum()), rng)
+        index, durations, currents = _draw_chunk(config, rng)
         states_parts.append(index)
         duration_parts.append(durations)
         current_parts.append(currents)
@@ -481,6 +470,32 @@ def generate_usage_profile(
         "stop_voltage_v": config.stop_voltage_v,
     }
     return LoadProfile(durations, currents[:n_keep], labels, metadata)
+
+
+def _check_max_points(max_points: int | None) -> int | None:
+    """``max_points`` as an int, or None; raises :class:`ProfileError` unless it is an integer >= 1."""
+    if max_points is None:
+        return None
+    if isinstance(max_points, bool) or not isinstance(max_points, int | np.integer) or max_points < 1:
+        raise ProfileError(f"temi profile: max_points is {max_points!r} (must be an integer >= 1)")
+    return int(max_points)
+
+
+def _draw_chunk(config: TemiUsageConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:data:`CHUNK_POINTS` usage points: state indices into :data:`STATES`, durations (s) and currents (A).
+
+    The states are drawn first, then every state's durations, then every state's currents (this order fixes what
+    a seed gives).
+    """
+    index = rng.choice(len(STATES), size=CHUNK_POINTS, p=np.array([config.probabilities[s] for s in STATES]))
+    durations = np.empty(CHUNK_POINTS)
+    currents = np.empty(CHUNK_POINTS)
+    masks = [index == k for k in range(len(STATES))]
+    for k, state in enumerate(STATES):
+        durations[masks[k]] = config.duration_distribution(state).sample(int(masks[k].sum()), rng)
+    for k, state in enumerate(STATES):
+        currents[masks[k]] = config.current_distribution(state).sample(int(masks[k].sum()), rng)
+    return index, durations, currents
 
 
 def _cut(
