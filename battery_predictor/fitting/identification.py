@@ -661,10 +661,7 @@ def identify(problem: IdentificationProblem, *, evaluations: int = DEFAULT_EVALU
     if evaluations < 2:
         raise BatteryPredictorError(f"--evaluations must be >= 2, got {evaluations}")
     coarse = coarsened(problem, coarse_window_s) if coarse_window_s else None
-    n_fine = int(round(fine_fraction * evaluations))
-    sweeps = any(c.name == SWEEP_COORDINATE for c in problem.space)
-    n_sweep = int(round(SWEEP_FRACTION * evaluations)) if sweeps else 0
-    n_first = evaluations - n_fine - n_sweep
+    n_first, n_sweep, n_fine = _stage_budgets(problem, evaluations, fine_fraction)
     if coarse is None or not 0.0 < fine_fraction < 1.0 or n_first < 2 or n_fine < 2:
         return _identify_one_stage(problem, evaluations=evaluations, seed=seed, tpe_fraction=tpe_fraction,
                                    starts=starts, startup_per_coordinate=startup_per_coordinate, progress=progress)
@@ -694,6 +691,28 @@ def identify(problem: IdentificationProblem, *, evaluations: int = DEFAULT_EVALU
                                   startup_per_coordinate=startup_per_coordinate, progress=progress, tic=tic)
     sweep_log = EvaluationLog(budget=0)
     swept = alignment_sweep(coarse, sweep_log, first.unit, min(n_sweep, n_fine + n_sweep - log.count))
+    return _refined_as_given(problem, first, residual, begin, swept, log, sweep_log, n_fine + n_sweep, history,
+                             label=label, progress=progress, tic=tic)
+
+
+def _stage_budgets(problem: IdentificationProblem, evaluations: int, fine_fraction: float) -> tuple[int, int, int]:
+    """Evaluations of :func:`identify`'s first (coarse) stage, its alignment sweep and its refinement on the data as
+    given: the sweep gets :data:`SWEEP_FRACTION` when the space has :data:`SWEEP_COORDINATE`, the refinement
+    ``fine_fraction``, the first stage the rest."""
+    n_fine = int(round(fine_fraction * evaluations))
+    sweeps = any(c.name == SWEEP_COORDINATE for c in problem.space)
+    n_sweep = int(round(SWEEP_FRACTION * evaluations)) if sweeps else 0
+    return evaluations - n_fine - n_sweep, n_sweep, n_fine
+
+
+def _refined_as_given(problem: IdentificationProblem, first: IdentificationResult,
+                      residual: Callable[[np.ndarray], np.ndarray], begin: np.ndarray,
+                      swept: tuple[float, np.ndarray] | None, log: EvaluationLog, sweep_log: EvaluationLog,
+                      budget: int, history: list[tuple[str, int, float]], *, label: str,
+                      progress: Callable[[str, int, float], None] | None, tic: float) -> IdentificationResult:
+    """:func:`identify`'s second stage: the refinement from ``begin`` on the data as given, and of the alignment
+    sweep's end when it lies below the first stage's cost, within ``budget`` evaluations (the sweep's included);
+    the better of the two by R2_mod."""
 
     def note(phase: str, count: int, cost: float) -> None:
         history.append((phase, count, cost))
@@ -703,7 +722,7 @@ def identify(problem: IdentificationProblem, *, evaluations: int = DEFAULT_EVALU
     if swept is not None:
         note(label + f"alignment sweep (reached {swept[0]:.4g})", first.evaluations + sweep_log.count, first.cost)
     # the refinement of the stage's result first: at most its share and what the sweep left
-    log.budget = n_fine + n_sweep - sweep_log.count
+    log.budget = budget - sweep_log.count
     cost, best = _refine(residual, begin, max_evaluations=log.budget)
     note("refine on the data as given", first.evaluations + sweep_log.count + log.count, cost)
     n_starts, scored = first.starts + 1, 0
