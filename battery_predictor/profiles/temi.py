@@ -433,10 +433,11 @@ def generate_usage_profile(
         raise ProfileError("temi profile: give at least one of max_duration_s, max_charge_ah, max_points")
 
     rng = np.random.default_rng(seed)
+    probabilities = np.array([config.probabilities[s] for s in STATES])
     states_parts, duration_parts, current_parts = [], [], []
     n_total, t_total, q_total = 0, 0.0, 0.0
     while True:
-        index, durations, currents = _draw_chunk(config, rng)
+        index, durations, currents = _draw_chunk(config, probabilities, rng)
         states_parts.append(index)
         duration_parts.append(durations)
         current_parts.append(currents)
@@ -481,13 +482,15 @@ def _check_max_points(max_points: int | None) -> int | None:
     return int(max_points)
 
 
-def _draw_chunk(config: TemiUsageConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:data:`CHUNK_POINTS` usage points: state indices into :data:`STATES`, durations (s) and currents (A).
+def _draw_chunk(config: TemiUsageConfig, probabilities: np.ndarray,
+                rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:data:`CHUNK_POINTS` usage points: state indices into :data:`STATES` (drawn with ``probabilities``, in
+    :data:`STATES` order), durations (s) and currents (A).
 
     The states are drawn first, then every state's durations, then every state's currents (this order fixes what
     a seed gives).
     """
-    index = rng.choice(len(STATES), size=CHUNK_POINTS, p=np.array([config.probabilities[s] for s in STATES]))
+    index = rng.choice(len(STATES), size=CHUNK_POINTS, p=probabilities)
     durations = np.empty(CHUNK_POINTS)
     currents = np.empty(CHUNK_POINTS)
     masks = [index == k for k in range(len(STATES))]
