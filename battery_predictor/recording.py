@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -223,6 +224,71 @@ def end_steepness(rec: Recording, charge_fraction: float = KNEE_CHARGE_FRACTION)
     k = int(np.searchsorted(q, q[-1] * (1.0 - charge_fraction)))
     before = float(np.median(u[max(k - 2, 0):k + 3]))  # a few samples: the noise
     return (before - float(u[-1])) / (charge_fraction * span)
+
+
+#: ``thresholds`` keys under which a fitted params file keeps the deepest state of its fit data
+#: (:class:`DeepestState`; written by ``fit``, read by the route check).
+DEEPEST_STATE_KEYS = ("fit_data_deepest_voltage_v", "fit_data_deepest_current_a", "fit_data_deepest_temperature_k")
+
+
+@dataclass(frozen=True)
+class DeepestState:
+    """The most discharged state a set of recordings shows: one sample of them.
+
+    Attributes
+    ----------
+    voltage_v : float
+        Terminal voltage at the sample, V.
+    current_a : float
+        Current at the sample, A (>= 0: discharge or rest).
+    temperature_k : float
+        Temperature at the sample, K.
+    """
+
+    voltage_v: float
+    current_a: float
+    temperature_k: float
+
+    def as_thresholds(self) -> dict[str, float]:
+        """The state as ``thresholds`` entries (:data:`DEEPEST_STATE_KEYS`)."""
+        return dict(zip(DEEPEST_STATE_KEYS, (self.voltage_v, self.current_a, self.temperature_k), strict=True))
+
+    @classmethod
+    def from_thresholds(cls, thresholds: dict[str, float]) -> DeepestState | None:
+        """The state kept in ``thresholds``; None unless all of :data:`DEEPEST_STATE_KEYS` are there."""
+        if not all(key in thresholds for key in DEEPEST_STATE_KEYS):
+            return None
+        return cls(*(float(thresholds[key]) for key in DEEPEST_STATE_KEYS))
+
+
+def deepest_state(recordings: Sequence[Recording], default_temperature_k: float) -> DeepestState | None:
+    """The sample of ``recordings`` whose voltage, corrected for the ohmic drop, is lowest; None without samples.
+
+    The correction is ``V + I R`` with the recordings' step resistance (:func:`step_resistance_ohm`, 0 for
+    constant currents), over the samples that discharge or rest (``I >= 0``), so that a high load on a full pack
+    does not count as deeper than a light one near empty.
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        Voltage in V, current in A (discharge positive), temperature in K or None.
+    default_temperature_k : float
+        Temperature (K) of a sample whose recording has none.
+    """
+    r_ohm = step_resistance_ohm(recordings)
+    best: tuple[float, DeepestState] | None = None
+    for rec in recordings:
+        v = np.asarray(rec.voltage_v, dtype=float)
+        i = np.asarray(rec.current_a, dtype=float)
+        corrected = np.where((i >= 0.0) & np.isfinite(v) & np.isfinite(i), v + i * r_ohm, np.inf)
+        if corrected.size == 0 or not np.isfinite(corrected.min()):
+            continue
+        k = int(np.argmin(corrected))
+        if best is None or corrected[k] < best[0]:
+            temp = float(rec.temperature_k[k]) if rec.temperature_k is not None else math.nan
+            temp = temp if math.isfinite(temp) else float(default_temperature_k)
+            best = (float(corrected[k]), DeepestState(float(v[k]), float(i[k]), temp))
+    return None if best is None else best[1]
 
 
 #: A sample discharges when its current exceeds this fraction of the recording's largest discharge current, and

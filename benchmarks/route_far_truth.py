@@ -11,13 +11,18 @@ to that moment and then by the route with each curve point's current drawn from 
 slope) samples (as the paper's experiments), ends the route's last standstill at or above 46.31 V (a
 cell reaching its cut-off during the route is a "no").
 
+With ``--weak-group LO HI`` the truth pack has one weak series group (the ``cell_imbalance`` extension: its
+cells hold a fraction drawn from LO..HI of the others' capacity), which the fitted params (``ranger_mini.yaml``:
+identical cells) do not have: its battery management stops the pack when the weak cells reach their cut-off,
+while the pack voltage is still above the route threshold.
+
 Printed: accepted / rejected against the truth, **unsafe accepts** (yes where the truth says no; must be 0),
 wasted rejects, and the error of the P50 voltage after the route against the truth's.
 
 Run::
 
     nice .venv/bin/python benchmarks/route_far_truth.py --seeds 60 61 [--every 20] [--instrument paper|5s]
-        [--drift-correction auto|full|smallest] [--work DIR] [--json]
+        [--drift-correction auto|full|smallest] [--weak-group LO HI] [--work DIR] [--json]
 """
 
 from __future__ import annotations
@@ -62,11 +67,18 @@ def truth_after_route(truth_params, day_load: StepLoad, at_s: float, route_load:
 
 
 def run_seed(seed: int, every_min: float, work: Path, instrument: str = far.INSTRUMENT,
-             drift_correction: str = "full") -> dict:
-    """Fit day 1 of ``seed``'s truth with the CLI, then score the route answers along day 2."""
+             drift_correction: str = "full", weak_group: tuple[float, float] | None = None) -> dict:
+    """Fit day 1 of ``seed``'s truth with the CLI, then score the route answers along day 2.
+
+    ``weak_group`` (low, high): the truth has a weak series group of a capacity fraction drawn from that range.
+    """
     params = load_params(REPO / "params" / "ranger_mini.yaml")
     truth = far.draw_truth(params, np.random.default_rng(1000 + seed))
     truth_params = params.with_values(pybamm_values(params, truth)[0])
+    weak_fraction = 1.0
+    if weak_group is not None:
+        weak_fraction = float(np.random.default_rng(7000 + seed).uniform(*weak_group))
+        truth_params = far.with_weak_group(truth_params, weak_fraction)
     fit_day, _, _ = far.day(truth_params, 2 * seed + 1, None, "ranger", instrument)
     test_day, _, test_load = far.day(truth_params, 2 * seed + 2, far.PACKS["ranger"][2], "ranger", instrument)
     fit_csv, fit_yaml = work / f"r{seed}_day1.csv", work / f"r{seed}_fit.yaml"
@@ -91,8 +103,8 @@ def run_seed(seed: int, every_min: float, work: Path, instrument: str = far.INST
         answers.append({"at_min": round(float(t[k - 1]) / 60.0, 1), "payload_kg": round(payload, 1),
                         "accepted": decision.accepted, "truth_yes": bool(truth_v >= THRESHOLD_V),
                         "predicted_v": decision.predicted_voltage_v, "truth_v": truth_v,
-                        "reason": decision.reason})
-    return {"seed": seed, "answers": answers}
+                        "measured_v": float(v[k - 1]), "reason": decision.reason})
+    return {"seed": seed, "weak_fraction": weak_fraction, "answers": answers}
 
 
 def tally(answers: list[dict]) -> dict:
@@ -114,6 +126,8 @@ def main() -> None:
     ap.add_argument("--instrument", choices=far.INSTRUMENTS, default=far.INSTRUMENT)
     ap.add_argument("--drift-correction", choices=DRIFT_CORRECTIONS, default=PredictorConfig.drift_correction,
                     help="the predictor's drift_correction (node parameter; default: the node's default)")
+    ap.add_argument("--weak-group", nargs=2, type=float, default=None, metavar=("LO", "HI"),
+                    help="the truth pack has a weak series group of a capacity fraction drawn from LO..HI")
     ap.add_argument("--work", type=Path, default=None,
                     help="keep the days and fits here and reuse a kept fit (ask one fit several ways)")
     ap.add_argument("--json", action="store_true")
@@ -121,20 +135,23 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
-        rows = [run_seed(s, args.every, work, args.instrument, args.drift_correction) for s in args.seeds]
+        rows = [run_seed(s, args.every, work, args.instrument, args.drift_correction,
+                         None if args.weak_group is None else tuple(args.weak_group)) for s in args.seeds]
     pooled = tally([a for r in rows for a in r["answers"]])
     if args.json:
         print(json.dumps({"seeds": rows, "pooled": pooled}, indent=1, default=float))
         return
     for r in rows:
         s = tally(r["answers"])
-        print(f"seed {r['seed']}: {s['questions']} questions, truth yes {s['truth_yes']}, accepted {s['accepted']}, "
+        weak = f" (weak group {r['weak_fraction']:.3f})" if r["weak_fraction"] < 1.0 else ""
+        print(f"seed {r['seed']}{weak}: {s['questions']} questions, truth yes {s['truth_yes']}, accepted {s['accepted']}, "
               f"unsafe accepts {s['unsafe_accepts']}, wasted rejects {s['wasted_rejects']}, P50 voltage error "
               f"{s['voltage_mae_v']:.3f} V (bias {s['voltage_bias_v']:+.3f} V)")
         for a in r["answers"]:
             if a["accepted"] != a["truth_yes"]:
                 print(f"  {'UNSAFE' if a['accepted'] else 'wasted'} at {a['at_min']} min, {a['payload_kg']} kg: "
-                      f"predicted {a['predicted_v']:.2f} V, truth {a['truth_v']:.2f} V; {a['reason'][:140]}")
+                      f"measured {a['measured_v']:.2f} V, predicted {a['predicted_v']:.2f} V, truth "
+                      f"{a['truth_v']:.2f} V; {a['reason'][:140]}")
     print(f"pooled: {json.dumps(pooled)}")
 
 

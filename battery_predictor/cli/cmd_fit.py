@@ -21,8 +21,10 @@ from battery_predictor.cli.common import (
     check_output_file,
     check_plot_file,
     engine_fallback,
+    print_deepest_state,
     print_json,
     progress_wanted,
+    with_deepest_state,
 )
 from battery_predictor.fitting.identification import DEFAULT_EVALUATIONS
 from battery_predictor.simulation import SIMULATORS
@@ -129,8 +131,9 @@ def _run_tpe(args: argparse.Namespace) -> int:
     best = problem.evaluate(result.best_values)
     report = raw_identifiability(problem, space, result.best_values)
     thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
-    fitted = params.with_values(result.best_values, provenance=_provenance(args, recs, best, result, report, thermal),
-                                fit=params.fit)
+    fitted, deepest = with_deepest_state(
+        params.with_values(result.best_values, provenance=_provenance(args, recs, best, result, report, thermal),
+                           fit=params.fit), recs)
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")
@@ -139,7 +142,8 @@ def _run_tpe(args: argparse.Namespace) -> int:
                     "failed_trials": result.failed_trials, "resumed_trials": result.resumed_trials,
                     "improved": result.improved, "seconds": result.seconds, "params": result.best_values,
                     "thermal": thermal, "identifiability": report.to_dict(), "out": str(out), "plot": str(plot_path),
-                    "engine_fallback": engine_fallback(best.results)})
+                    "engine_fallback": engine_fallback(best.results),
+                    "fit_data_deepest_state": None if deepest is None else deepest.as_thresholds()})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
           f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s; "
@@ -147,6 +151,7 @@ def _run_tpe(args: argparse.Namespace) -> int:
     _print_values(result, space)
     for line in report.summary_lines():
         print(line)
+    print_deepest_state(deepest)
     print(f"wrote {out} and {plot_path}")
     return 0
 

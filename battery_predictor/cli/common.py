@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from battery_predictor.errors import InputDataError
 from battery_predictor.params import PackParams
-from battery_predictor.recording import Recording
+from battery_predictor.recording import DeepestState, Recording, deepest_state
 
 if TYPE_CHECKING:
     import argparse
@@ -110,6 +110,34 @@ def prepared_data(args: argparse.Namespace, params: PackParams, *, command: str)
         sys.stderr.write(f"{command}: {notice}\n")
         sys.stderr.flush()
     return recs
+
+
+def with_deepest_state(params: PackParams, recordings: Sequence[Recording]) -> tuple[PackParams, DeepestState | None]:
+    """``params`` keeping the fit data's deepest state in ``thresholds``, and that state (None: none kept).
+
+    The route check does not let a route draw the pack below it when it lies above the route threshold
+    (:func:`~battery_predictor.prediction.safety.charge_floor`). A state outside the pack's voltage
+    window is not kept (it is below any threshold).
+    """
+    from dataclasses import replace
+
+    from battery_predictor.params_checks import pack_voltage_window_v
+
+    deepest = deepest_state(recordings, params.ambient_temperature_k)
+    if deepest is None:
+        return params, None
+    low, high = pack_voltage_window_v(params)
+    if not low <= deepest.voltage_v <= high:
+        return params, None
+    return replace(params, thresholds={**params.thresholds, **deepest.as_thresholds()}), deepest
+
+
+def print_deepest_state(deepest: DeepestState | None) -> None:
+    """Say which state of the fit data the fitted params keep as their deepest (see :func:`with_deepest_state`)."""
+    if deepest is not None:
+        print(f"deepest state of the fit data: {deepest.voltage_v:.3f} V at {deepest.current_a:.2f} A "
+              f"({deepest.temperature_k - 273.15:.1f} degC); routes are not accepted below it when it lies "
+              "above the route threshold (thresholds.fit_data_deepest_*)")
 
 
 def add_data_arguments(parser: argparse.ArgumentParser) -> None:

@@ -15,7 +15,9 @@ from battery_predictor.cli.common import (
     check_plot_file,
     engine_fallback,
     prepared_data,
+    print_deepest_state,
     print_json,
+    with_deepest_state,
 )
 from battery_predictor.errors import InputDataError
 from battery_predictor.ocp import ocp_origin
@@ -87,7 +89,8 @@ def run_identify(args: argparse.Namespace) -> int:
     states = {str(r.source): result.coordinates[c.name] for r, c in zip(recs, space[-len(recs):], strict=True)}
     provenance = _provenance(args, params, recs, best, result, report, states, thermal, problem.fits_weakest_group)
     provenance.update({"structure": chosen.label, "structures": structures})
-    fitted = params.with_values(best.values[0], provenance=provenance, fit=params.fit)
+    fitted, deepest = with_deepest_state(params.with_values(best.values[0], provenance=provenance, fit=params.fit),
+                                         recs)
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}",
@@ -102,7 +105,9 @@ def run_identify(args: argparse.Namespace) -> int:
                     "coordinates": result.coordinates, "params": best.values[0],
                     "fitted_weakest_group_voltage": problem.fits_weakest_group,
                     "identifiability": report.to_dict(), "ocp": ocp_origin(params), "thermal": thermal,
-                    "engine_fallback": engine_fallback(best.results), "out": str(out), "plot": str(plot_path)})
+                    "engine_fallback": engine_fallback(best.results),
+                    "fit_data_deepest_state": None if deepest is None else deepest.as_thresholds(),
+                    "out": str(out), "plot": str(plot_path)})
         return 0
     if problem.fits_weakest_group:
         print("fitting the weakest measured group voltage too (cell_imbalance; --ignore-group-voltages: pack only)")
@@ -119,6 +124,7 @@ def run_identify(args: argparse.Namespace) -> int:
         print(line)
     if engine_fallback(best.results):
         print(f"engine fallback: {engine_fallback(best.results)}")
+    print_deepest_state(deepest)
     print(f"wrote {out} and {plot_path}")
     return 0
 

@@ -27,7 +27,13 @@ from battery_predictor.prediction.pack_model import PackModel, pack_model
 from battery_predictor.prediction.priority import RoutePriority, YieldingRunner
 from battery_predictor.prediction.route import RouteDecision, rejected
 from battery_predictor.prediction.runtime import RuntimePrediction, predict_remaining_runtime, sampled_fraction_of
-from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v, unexplained_jump_v
+from battery_predictor.prediction.safety import (
+    ChargeFloor,
+    charge_floor,
+    pulse_resistance_ohm,
+    standstill_voltage_v,
+    unexplained_jump_v,
+)
 from battery_predictor.prediction.temperature import (
     THERMAL_FORECASTS,
     AmbientEstimate,
@@ -45,6 +51,7 @@ from battery_predictor.prediction.uncertainty import (
     runtime_spread,
     uncertainty_model,
 )
+from battery_predictor.recording import DeepestState
 from battery_predictor.simulation.cell_setup import is_lumped_thermal, with_thermal
 
 if TYPE_CHECKING:
@@ -389,6 +396,8 @@ class PredictorCore:
         self.state_tolerance_v = config.state_tolerance_v_per_cell * series
         self.jump_tolerance_v = config.jump_tolerance_v_per_cell * series
         self._resistance_cache: dict[int, float] = {}
+        #: The routes' charge floor from the fit data's deepest state, once computed (a 1-tuple; None: not yet).
+        self._floor: tuple[ChargeFloor | None] | None = None
         self.resistance_ohm = self._resistance(self.default_temperature_k) if self.runner is not None else math.nan
         self._currents = None
         if config.route_currents_file:
@@ -861,6 +870,10 @@ class PredictorCore:
                                           standstill_current_a=self.standstill_current_a, currents=self._currents,
                                           risk=self.config.decision_risk, model=self.uncertainty,
                                           state_voltage_sigma_v=self.state_voltage_sigma_v(cal))
+        floor_reason = self._charge_floor_reason(decision) if decision.accepted else ""
+        if floor_reason:
+            decision = replace(decision, accepted=False,
+                               reason=f"rejected: {floor_reason}; {decision.reason.split(': ', 1)[-1]}")
         notes = [soc_note] if soc_note else []
         if cal.soc < 0.05 and decision.accepted:
             notes.append("the SOC scale's 0 is the OCV at the params' 0 % point; the pack may be used below it "
@@ -871,6 +884,28 @@ class PredictorCore:
             notes.append("ends away from the charger: no return leg included")
         reason = decision.reason + ("; " + "; ".join(notes) if notes else "")
         return replace(decision, state_of_charge=soc, reason=reason)
+
+    def _charge_floor_reason(self, decision: RouteDecision) -> str:
+        """Why ``decision``'s route goes deeper than the fit data's deepest state allows ("" when it does not).
+
+        The floor (:func:`~.safety.charge_floor`) is computed once, on the first route that asks.
+        """
+        deepest = DeepestState.from_thresholds(self.params.thresholds) if self.params is not None else None
+        if deepest is None:
+            return ""
+        if self._floor is None:
+            try:
+                floor = charge_floor(self._runner(), deepest, threshold_v=self.route_min_voltage_v,
+                                     standstill_current_a=self.standstill_current_a,
+                                     resistance_ohm=self._resistance(deepest.temperature_k))
+            except BatteryPredictorError as exc:
+                return f"model failed on the fit data's deepest state: {exc}"
+            self._floor = (floor,)
+        floor = self._floor[0]
+        if floor is None:
+            return ""
+        end_soc = decision.state_of_charge - decision.route_charge_ah / self._runner().capacity_ah
+        return floor.reason(end_soc) if end_soc < floor.soc else ""
 
 
 def published_soc(soc: float) -> tuple[float, str]:

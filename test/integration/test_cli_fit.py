@@ -13,6 +13,7 @@ import yaml
 
 from battery_predictor.io.csv_io import save_csv
 from battery_predictor.params import load_params
+from battery_predictor.recording import DeepestState
 
 REPO = Path(__file__).resolve().parents[2]
 CLI = str(Path(sys.executable).parent / "battery-predictor")
@@ -42,6 +43,9 @@ def test_fit_json_and_fitted_params_file_loadable(train_csv, tmp_path):
     fitted = load_params(out)
     assert fitted.value("r_c_ohm") == pytest.approx(obj["params"]["r_c_ohm"])
     assert fitted.provenance["r2_mod"] == pytest.approx(obj["r2_mod"])
+    # the data's deepest state is kept for the route check unless it lies outside the pack's window (as here)
+    deepest = DeepestState.from_thresholds(fitted.thresholds)
+    assert obj["fit_data_deepest_state"] == (None if deepest is None else deepest.as_thresholds())
     assert out.with_suffix(".png").stat().st_size > 10_000
     assert out.with_suffix(".optuna.db").exists()
     # resume: asking for 15 trials runs only 3 more on the same study

@@ -12,7 +12,7 @@ import pytest
 
 from battery_predictor.io.csv_io import save_csv
 from battery_predictor.params import load_params
-from battery_predictor.recording import Recording
+from battery_predictor.recording import DeepestState, Recording
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
 
 REPO = Path(__file__).resolve().parents[2]
@@ -55,6 +55,8 @@ def test_fit_identify_json_reports_budget_coordinates_and_identifiability(one_se
     fitted = load_params(out)
     assert fitted.provenance["resample_s"] == 10.0
     assert "identifiability" in fitted.provenance
+    deepest = DeepestState.from_thresholds(fitted.thresholds)  # the 10 s windows' deepest, kept for the route check
+    assert deepest is not None and deepest.as_thresholds() == pytest.approx(obj["fit_data_deepest_state"])
     sim = _run("simulate", "--params", str(out), "--data", str(one_second_csv), "--resample", "10", "--json")
     assert sim.returncode == 0, sim.stderr
     assert json.loads(sim.stdout)["r2_mod"] == pytest.approx(obj["r2_mod"], abs=0.02)

@@ -39,3 +39,12 @@ def test_the_tally_counts_a_yes_where_the_truth_says_no_as_unsafe(bench):
     t = bench.tally(answers)
     assert (t["questions"], t["unsafe_accepts"], t["wasted_rejects"], t["accepted"], t["truth_yes"]) == (4, 1, 1, 2, 2)
     assert t["voltage_mae_v"] == pytest.approx((0.4 + 0.2 + 0.0) / 3)
+
+
+def test_a_truth_with_a_weak_group_says_no_where_the_pack_voltage_alone_would_say_yes(bench):
+    params = load_params(REPO / "params" / "ranger_mini.yaml")
+    route = StepLoad.from_profile(route_profile(longest_route(80.0), mode="mean"))
+    day = StepLoad.constant(10.0, 4 * 3600.0)
+    # after 1.8 h at 10 A the identical cells end the route above the threshold; a group at 80 % stops on the way
+    assert bench.truth_after_route(params, day, 1.8 * 3600.0, route) >= bench.THRESHOLD_V
+    assert math.isnan(bench.truth_after_route(bench.far.with_weak_group(params, 0.8), day, 1.8 * 3600.0, route))
