@@ -1,6 +1,6 @@
 """Checks of the model's state against the measurements, applied before any answer is given.
 
-Three rules guard the predictor's answers:
+Four rules guard the predictor's answers:
 
 - **The measurement has the last word on routes.** The latest measured pack voltage, moved to the
   standstill current with the pack's resistance (:func:`standstill_voltage_v`), already below the
@@ -143,6 +143,8 @@ def charge_floor(runner: PackModel, deepest: DeepestState | None, *, threshold_v
     """
     if deepest is None:
         return None
+    if not math.isfinite(resistance_ohm):
+        raise SimulationError(f"no pack resistance at the deepest state's {deepest.temperature_k:.1f} K")
     v_standstill = standstill_voltage_v(deepest.voltage_v, deepest.current_a, standstill_current_a, resistance_ohm)
     if not v_standstill > threshold_v:
         return None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -85,3 +86,15 @@ def test_the_floor_leaves_routes_that_end_above_it_and_fit_data_that_reached_the
     reached = ranger_at(47.6, DeepestState(45.5, 2.2, T_K)).can_accept_route(route, 56.0)
     alone = ranger_at(47.6, None).can_accept_route(route, 56.0)
     assert (reached.accepted, reached.reason) == (alone.accepted, alone.reason)
+
+
+def test_a_floor_the_model_cannot_compute_rejects_the_route_with_the_reason(monkeypatch):
+    core = ranger_at(48.5, DeepestState(47.6, 2.2, T_K))
+    real = core._resistance
+    monkeypatch.setattr(core, "_resistance", lambda temperature_k: math.nan if temperature_k == T_K + 0.5 else
+                        real(temperature_k))
+    core.params = replace(core.params, thresholds={**core.params.thresholds,
+                                                   **DeepestState(47.6, 2.2, T_K + 0.5).as_thresholds()})
+    decision = core.can_accept_route(longest_route(40.0).sections, 56.0)
+    assert not decision.accepted
+    assert "model failed on the fit data's deepest state: no pack resistance" in decision.reason
