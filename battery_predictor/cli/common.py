@@ -9,11 +9,13 @@ import os
 import shutil
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from battery_predictor.errors import InputDataError
 from battery_predictor.params import PackParams
+from battery_predictor.params_checks import pack_voltage_window_v
 from battery_predictor.recording import DeepestState, Recording, deepest_state
 
 if TYPE_CHECKING:
@@ -119,10 +121,6 @@ def with_deepest_state(params: PackParams, recordings: Sequence[Recording]) -> t
     (:func:`~battery_predictor.prediction.safety.charge_floor`). A state outside the pack's voltage
     window is not kept (it is below any threshold).
     """
-    from dataclasses import replace
-
-    from battery_predictor.params_checks import pack_voltage_window_v
-
     deepest = deepest_state(recordings, params.ambient_temperature_k)
     if deepest is None:
         return params, None

@@ -904,7 +904,7 @@ class PredictorCore:
         floor = self._floor[0]
         if floor is None:
             return ""
-        end_soc = decision.state_of_charge - decision.route_charge_ah / self._runner().capacity_ah
+        end_soc = decision.end_soc(self._runner().capacity_ah)
         return floor.reason(end_soc) if end_soc < floor.soc else ""
 
 

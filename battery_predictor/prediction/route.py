@@ -70,6 +70,10 @@ class RouteDecision:
     voltage_at_risk_v: float = math.nan
     risk: float = math.nan
 
+    def end_soc(self, capacity_ah: float) -> float:
+        """The model's SOC after the route: the start SOC less the route's charge over ``capacity_ah`` (Ah)."""
+        return self.state_of_charge - self.route_charge_ah / capacity_ah
+
 
 def route_segments(sections: Sequence[RouteSection], standstill_current_a: float,
                    currents: RangerCurrents | None = None) -> list[tuple[float, float]]:

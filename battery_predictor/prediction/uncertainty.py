@@ -575,7 +575,7 @@ def evaluate_route_at_risk(runner: PackModel, start: RunStart, sections: Sequenc
                               segments=segments).predicted_voltage_v
 
     soc = decision.state_of_charge
-    end_soc = soc - decision.route_charge_ah / runner.capacity_ah
+    end_soc = decision.end_soc(runner.capacity_ah)
     spread = route_spread(runner, soc, end_soc, decision.route_charge_ah, route_charge_sigma_ah(sections, currents),
                           temperature_k, model, state_voltage_sigma_v, end_voltage_at)
     probability = spread.probability_above(decision.margin_v)
