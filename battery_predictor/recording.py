@@ -278,17 +278,58 @@ def deepest_state(recordings: Sequence[Recording], default_temperature_k: float)
     r_ohm = step_resistance_ohm(recordings)
     best: tuple[float, DeepestState] | None = None
     for rec in recordings:
-        v = np.asarray(rec.voltage_v, dtype=float)
-        i = np.asarray(rec.current_a, dtype=float)
-        corrected = np.where((i >= 0.0) & np.isfinite(v) & np.isfinite(i), v + i * r_ohm, np.inf)
+        corrected = _depth_voltage_v(rec, r_ohm)
         if corrected.size == 0 or not np.isfinite(corrected.min()):
             continue
         k = int(np.argmin(corrected))
         if best is None or corrected[k] < best[0]:
             temp = float(rec.temperature_k[k]) if rec.temperature_k is not None else math.nan
             temp = temp if math.isfinite(temp) else float(default_temperature_k)
-            best = (float(corrected[k]), DeepestState(float(v[k]), float(i[k]), temp))
+            best = (float(corrected[k]), DeepestState(float(rec.voltage_v[k]), float(rec.current_a[k]), temp))
     return None if best is None else best[1]
+
+
+def _depth_voltage_v(rec: Recording, r_ohm: float) -> np.ndarray:
+    """``V + I R`` (V) of the samples that discharge or rest, +inf elsewhere (the depth :func:`deepest_state` ranks)."""
+    v = np.asarray(rec.voltage_v, dtype=float)
+    i = np.asarray(rec.current_a, dtype=float)
+    return np.where((i >= 0.0) & np.isfinite(v) & np.isfinite(i), v + i * r_ohm, np.inf)
+
+
+def ends_at_deepest(recordings: Sequence[Recording]) -> bool:
+    """True when the recordings' deepest state (:func:`deepest_state`) is where one of them ends, discharging.
+
+    Such data stopped under load: the pack (and a robot's logger with it) was switched off there, as
+    the battery management does when a cell reaches its cut-off. Data that end at rest, charging or
+    recovered from their deepest state (the robot went to its charger) did not. A recording that ends
+    within :data:`END_AT_MIN_FRACTION` of its depth range above the deepest state counts as ending there
+    (the noise).
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        Voltage in V, current in A (discharge positive).
+    """
+    r_ohm = step_resistance_ohm(recordings)
+    depths = [_depth_voltage_v(rec, r_ohm) for rec in recordings]
+    finite = [d[np.isfinite(d)] for d in depths]
+    if not any(f.size for f in finite):
+        return False
+    lowest = min(float(f.min()) for f in finite if f.size)
+    for rec, depth, f in zip(recordings, depths, finite, strict=True):
+        if f.size < 2 or not rec.current_a[-1] > 0.0 or not np.isfinite(depth[-1]):
+            continue
+        if depth[-1] - lowest <= END_AT_MIN_FRACTION * float(f.max() - f.min()):
+            return True
+    return False
+    lowest = min(float(f.min()) for f in finite if f.size)
+    for rec, depth, f in zip(recordings, depths, finite, strict=True):
+        if f.size < 2 or not rec.current_a[-1] > 0.0 or not np.isfinite(depth[-1]):
+            continue
+        span = float(f.max() - f.min())
+        if depth[-1] - lowest <= END_AT_MIN_FRACTION * span and not ends_at_cutoff(rec):
+            return True
+    return False
 
 
 #: A sample discharges when its current exceeds this fraction of the recording's largest discharge current, and

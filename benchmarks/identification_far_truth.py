@@ -83,15 +83,6 @@ def draw_truth(params, rng) -> dict[str, float]:
     }
 
 
-def with_weak_group(truth_params, fraction: float):
-    """The truth with one weak series group whose cells hold ``fraction`` of the others' capacity (``cell_imbalance``)."""
-    from battery_predictor.simulation.extensions import WEAK_FRACTION
-
-    extensions = tuple(truth_params.extensions) + (("cell_imbalance",) if "cell_imbalance" not in
-                                                   truth_params.extensions else ())
-    return replace(truth_params, extensions=extensions, extra={**truth_params.extra, WEAK_FRACTION: float(fraction)})
-
-
 def ranger_day_profile(seed: int):
     """Longest routes at payloads drawn from 0-80 kg, each followed by 5-30 min of standstill."""
     rng = np.random.default_rng(seed)

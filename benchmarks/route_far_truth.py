@@ -48,6 +48,7 @@ from battery_predictor.params import load_params  # noqa: E402
 from battery_predictor.prediction.core import DRIFT_CORRECTIONS, PredictorConfig, PredictorCore  # noqa: E402
 from battery_predictor.profiles import load_ranger_currents, longest_route, route_profile  # noqa: E402
 from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator  # noqa: E402
+from battery_predictor.simulation.extensions import with_weak_group  # noqa: E402
 
 THRESHOLD_V = 46.31
 
@@ -78,7 +79,7 @@ def run_seed(seed: int, every_min: float, work: Path, instrument: str = far.INST
     weak_fraction = 1.0
     if weak_group is not None:
         weak_fraction = float(np.random.default_rng(7000 + seed).uniform(*weak_group))
-        truth_params = far.with_weak_group(truth_params, weak_fraction)
+        truth_params = with_weak_group(truth_params, weak_fraction)
     fit_day, _, _ = far.day(truth_params, 2 * seed + 1, None, "ranger", instrument)
     test_day, _, test_load = far.day(truth_params, 2 * seed + 2, far.PACKS["ranger"][2], "ranger", instrument)
     fit_csv, fit_yaml = work / f"r{seed}_day1.csv", work / f"r{seed}_fit.yaml"

@@ -21,9 +21,11 @@ from battery_predictor.cli.common import (
     check_output_file,
     check_plot_file,
     engine_fallback,
+    inferred_group_of,
     print_deepest_state,
     print_json,
     progress_wanted,
+    weak_group_json,
     with_deepest_state,
 )
 from battery_predictor.fitting.identification import DEFAULT_EVALUATIONS
@@ -82,6 +84,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "cell.options thermal), isothermal at the data's temperature, or lumped (PyBaMM's lumped "
                         "thermal cell self-heating from the data's first temperature)")
     p.add_argument("--initial-state", choices=("auto", "params", "voltage"), default="auto")
+    p.add_argument("--no-weak-group-inference", action="store_true",
+                   help="keep the params' cells identical even when the fit data stop under load above the "
+                        "route threshold (default: infer the weak series group that makes the pack stop there)")
     p.add_argument("--out", required=True, help="fitted params YAML to write")
     p.add_argument("--plot", default=None, help="PNG of measured vs simulated (default: <out>.png)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -134,6 +139,7 @@ def _run_tpe(args: argparse.Namespace) -> int:
     fitted, deepest = with_deepest_state(
         params.with_values(result.best_values, provenance=_provenance(args, recs, best, result, report, thermal),
                            fit=params.fit), recs)
+    fitted, weak_line = inferred_group_of(args, fitted, recs, deepest)
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")
@@ -143,7 +149,8 @@ def _run_tpe(args: argparse.Namespace) -> int:
                     "improved": result.improved, "seconds": result.seconds, "params": result.best_values,
                     "thermal": thermal, "identifiability": report.to_dict(), "out": str(out), "plot": str(plot_path),
                     "engine_fallback": engine_fallback(best.results),
-                    "fit_data_deepest_state": None if deepest is None else deepest.as_thresholds()})
+                    "fit_data_deepest_state": None if deepest is None else deepest.as_thresholds(),
+                    "weak_group": weak_group_json(fitted, weak_line)})
         return 0
     print(f"fit of {params.name} on {len(recs)} file(s): R2_mod = {best.r2_mod:.4f} "
           f"({result.trials} trials, {result.failed_trials} failed, {result.seconds:.0f} s; "
@@ -152,6 +159,7 @@ def _run_tpe(args: argparse.Namespace) -> int:
     for line in report.summary_lines():
         print(line)
     print_deepest_state(deepest)
+    print(weak_line)
     print(f"wrote {out} and {plot_path}")
     return 0
 

@@ -130,6 +130,50 @@ def with_deepest_state(params: PackParams, recordings: Sequence[Recording]) -> t
     return replace(params, thresholds={**params.thresholds, **deepest.as_thresholds()}), deepest
 
 
+def with_inferred_weak_group(params: PackParams, recordings: Sequence[Recording],
+                             deepest: DeepestState | None) -> tuple[PackParams, str]:
+    """``params`` with the weak series group the fit data's stop implies, and a line saying what was done.
+
+    See :mod:`battery_predictor.prediction.weak_group`: only data that stop under load above the
+    route threshold call for one; otherwise ``params`` come back unchanged with the reason.
+
+    Raises
+    ------
+    SimulationError
+        When the model cannot run the discharges the inference needs.
+    """
+    from battery_predictor.prediction.weak_group import inferred_weak_fraction, weak_group_evidence
+    from battery_predictor.simulation.extensions import with_weak_group
+
+    why_not = weak_group_evidence(params, recordings, deepest)
+    if why_not or deepest is None:
+        return params, f"no weak series group inferred ({why_not})"
+    inference = inferred_weak_fraction(params, deepest)
+    return with_weak_group(params, inference.fraction), inference.describe()
+
+
+def inferred_group_of(args: argparse.Namespace, params: PackParams, recordings: Sequence[Recording],
+                      deepest: DeepestState | None) -> tuple[PackParams, str]:
+    """:func:`with_inferred_weak_group` unless ``--no-weak-group-inference``; a model failure keeps ``params``
+    with the reason (the fit is not lost)."""
+    from battery_predictor.errors import BatteryPredictorError
+
+    if getattr(args, "no_weak_group_inference", False):
+        return params, "no weak series group inferred (--no-weak-group-inference)"
+    try:
+        return with_inferred_weak_group(params, recordings, deepest)
+    except BatteryPredictorError as exc:
+        return params, f"no weak series group inferred (the model failed: {exc})"
+
+
+def weak_group_json(params: PackParams, line: str) -> dict[str, Any]:
+    """The fitted params' weak group for ``--json``: its fraction (None without one) and the fit's line about it."""
+    from battery_predictor.simulation.extensions import weak_group_fraction
+
+    fraction = weak_group_fraction(params)
+    return {"fraction": fraction if "cell_imbalance" in params.extensions else None, "note": line}
+
+
 def print_deepest_state(deepest: DeepestState | None) -> None:
     """Say which state of the fit data the fitted params keep as their deepest (see :func:`with_deepest_state`)."""
     if deepest is not None:

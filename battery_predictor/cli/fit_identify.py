@@ -14,9 +14,11 @@ from battery_predictor.cli.common import (
     check_output_file,
     check_plot_file,
     engine_fallback,
+    inferred_group_of,
     prepared_data,
     print_deepest_state,
     print_json,
+    weak_group_json,
     with_deepest_state,
 )
 from battery_predictor.errors import InputDataError
@@ -91,6 +93,7 @@ def run_identify(args: argparse.Namespace) -> int:
     provenance.update({"structure": chosen.label, "structures": structures})
     fitted, deepest = with_deepest_state(params.with_values(best.values[0], provenance=provenance, fit=params.fit),
                                          recs)
+    fitted, weak_line = inferred_group_of(args, fitted, recs, deepest)
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}",
@@ -107,6 +110,7 @@ def run_identify(args: argparse.Namespace) -> int:
                     "identifiability": report.to_dict(), "ocp": ocp_origin(params), "thermal": thermal,
                     "engine_fallback": engine_fallback(best.results),
                     "fit_data_deepest_state": None if deepest is None else deepest.as_thresholds(),
+                    "weak_group": weak_group_json(fitted, weak_line),
                     "out": str(out), "plot": str(plot_path)})
         return 0
     if problem.fits_weakest_group:
@@ -125,6 +129,7 @@ def run_identify(args: argparse.Namespace) -> int:
     if engine_fallback(best.results):
         print(f"engine fallback: {engine_fallback(best.results)}")
     print_deepest_state(deepest)
+    print(weak_line)
     print(f"wrote {out} and {plot_path}")
     return 0
 

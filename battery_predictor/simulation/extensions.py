@@ -342,6 +342,17 @@ def weak_group_fraction(params: PackParams) -> float:
     return extension_value(params, WEAK_FRACTION)
 
 
+def with_weak_group(params: PackParams, fraction: float) -> PackParams:
+    """``params`` with one weak series group whose cells hold ``fraction`` (0..1] of the others' capacity.
+
+    The extension ``cell_imbalance`` is added when absent; its value is set in ``cell.extra``.
+    """
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"weak group fraction must lie in (0, 1], got {fraction}")
+    extensions = tuple(dict.fromkeys((*params.extensions, "cell_imbalance")))
+    return replace(params, extensions=extensions, extra={**params.extra, WEAK_FRACTION: float(fraction)})
+
+
 def imbalance_cell_inputs(params: PackParams) -> dict[str, np.ndarray] | None:
     """Per-cell ``Electrode height [m]`` for liionpack: series position 0 of every string is weak.
 

@@ -13,7 +13,9 @@ import yaml
 
 from battery_predictor.io.csv_io import save_csv
 from battery_predictor.params import load_params
-from battery_predictor.recording import DeepestState
+from battery_predictor.prediction.pack_model import pack_model
+from battery_predictor.recording import DeepestState, Recording
+from battery_predictor.simulation.extensions import weak_group_fraction, with_weak_group
 
 REPO = Path(__file__).resolve().parents[2]
 CLI = str(Path(sys.executable).parent / "battery-predictor")
@@ -46,12 +48,38 @@ def test_fit_json_and_fitted_params_file_loadable(train_csv, tmp_path):
     # the data's deepest state is kept for the route check unless it lies outside the pack's window (as here)
     deepest = DeepestState.from_thresholds(fitted.thresholds)
     assert obj["fit_data_deepest_state"] == (None if deepest is None else deepest.as_thresholds())
+    assert obj["weak_group"] == {"fraction": None, "note": "no weak series group inferred (no route threshold)"}
     assert out.with_suffix(".png").stat().st_size > 10_000
     assert out.with_suffix(".optuna.db").exists()
     # resume: asking for 15 trials runs only 3 more on the same study
     proc2 = _run("fit", "--params", "params/temi.yaml", "--data", str(train_csv), "--trials", "15", "--seed", "3",
                  "--parameters", "Electrode height [m]", "r_c_ohm", "--out", str(out), "--json", "--no-progress")
     assert json.loads(proc2.stdout)["trials"] == 15
+
+
+@pytest.mark.slow
+def test_fit_of_ranger_data_that_stop_under_load_above_the_threshold_writes_the_weak_group_they_imply(tmp_path):
+    params = load_params(REPO / "params" / "ranger_mini.yaml")
+    run = pack_model(with_weak_group(params, 0.8))[0].run(1.0, [(48 * 3600.0, 3.0)], 298.15)
+    t = np.append(np.arange(0.0, float(run.time_s[-1]), 60.0), float(run.time_s[-1]))
+    csv = tmp_path / "weak_day.csv"
+    save_csv(Recording(t, np.interp(t, run.time_s, run.pack_voltage_v), np.full(t.size, 3.0)), csv)
+    out = tmp_path / "fit.yaml"
+    proc = _run("fit", "--params", "params/ranger_mini.yaml", "--data", str(csv), "--method", "tpe", "--trials", "4",
+                "--parameters", "r_c_ohm", "--out", str(out), "--json", "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    obj = json.loads(proc.stdout)
+    fitted = load_params(out)
+    assert "cell_imbalance" in fitted.extensions
+    assert obj["weak_group"]["fraction"] == pytest.approx(weak_group_fraction(fitted))
+    assert weak_group_fraction(fitted) == pytest.approx(0.8, abs=0.03)
+    assert obj["weak_group"]["note"].startswith("weak series group inferred")
+    again = _run("fit", "--params", "params/ranger_mini.yaml", "--data", str(csv), "--method", "tpe", "--trials", "4",
+                 "--parameters", "r_c_ohm", "--out", str(tmp_path / "off.yaml"), "--no-progress",
+                 "--no-weak-group-inference")
+    assert again.returncode == 0, again.stderr
+    assert "no weak series group inferred (--no-weak-group-inference)" in again.stdout
+    assert "cell_imbalance" not in load_params(tmp_path / "off.yaml").extensions
 
 
 def test_simulate_json_reports_score_and_runtimes(train_csv):

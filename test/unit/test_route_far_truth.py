@@ -47,4 +47,4 @@ def test_a_truth_with_a_weak_group_says_no_where_the_pack_voltage_alone_would_sa
     day = StepLoad.constant(10.0, 4 * 3600.0)
     # after 1.8 h at 10 A the identical cells end the route above the threshold; a group at 80 % stops on the way
     assert bench.truth_after_route(params, day, 1.8 * 3600.0, route) >= bench.THRESHOLD_V
-    assert math.isnan(bench.truth_after_route(bench.far.with_weak_group(params, 0.8), day, 1.8 * 3600.0, route))
+    assert math.isnan(bench.truth_after_route(bench.with_weak_group(params, 0.8), day, 1.8 * 3600.0, route))
