@@ -296,8 +296,8 @@ def _depth_voltage_v(rec: Recording, r_ohm: float) -> np.ndarray:
     return np.where((i >= 0.0) & np.isfinite(v) & np.isfinite(i), v + i * r_ohm, np.inf)
 
 
-def ends_at_deepest(recordings: Sequence[Recording]) -> bool:
-    """True when the recordings' deepest state (:func:`deepest_state`) is where one of them ends, discharging.
+def recording_ending_at_deepest(recordings: Sequence[Recording]) -> Recording | None:
+    """The recording that ends, discharging, at the recordings' deepest state (:func:`deepest_state`); None if none.
 
     Such data stopped under load: the pack (and a robot's logger with it) was switched off there, as
     the battery management does when a cell reaches its cut-off. Data that end at rest, charging or
@@ -314,7 +314,14 @@ def ends_at_deepest(recordings: Sequence[Recording]) -> bool:
     depths = [_depth_voltage_v(rec, r_ohm) for rec in recordings]
     finite = [d[np.isfinite(d)] for d in depths]
     if not any(f.size for f in finite):
-        return False
+        return None
+    lowest = min(float(f.min()) for f in finite if f.size)
+    for rec, depth, f in zip(recordings, depths, finite, strict=True):
+        if f.size < 2 or not rec.current_a[-1] > 0.0 or not np.isfinite(depth[-1]):
+            continue
+        if depth[-1] - lowest <= END_AT_MIN_FRACTION * float(f.max() - f.min()):
+            return rec
+    return None
     lowest = min(float(f.min()) for f in finite if f.size)
     for rec, depth, f in zip(recordings, depths, finite, strict=True):
         if f.size < 2 or not rec.current_a[-1] > 0.0 or not np.isfinite(depth[-1]):

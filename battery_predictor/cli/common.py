@@ -134,21 +134,21 @@ def with_inferred_weak_group(params: PackParams, recordings: Sequence[Recording]
                              deepest: DeepestState | None) -> tuple[PackParams, str]:
     """``params`` with the weak series group the fit data's stop implies, and a line saying what was done.
 
-    See :mod:`battery_predictor.prediction.weak_group`: only data that stop under load above the
+    See :mod:`battery_predictor.fitting.weak_group`: only data that stop under load above the
     route threshold call for one; otherwise ``params`` come back unchanged with the reason.
 
     Raises
     ------
     SimulationError
-        When the model cannot run the discharges the inference needs.
+        When the model cannot run the recordings the inference needs.
     """
-    from battery_predictor.prediction.weak_group import inferred_weak_fraction, weak_group_evidence
+    from battery_predictor.fitting.weak_group import inferred_weak_fraction, weak_group_evidence
     from battery_predictor.simulation.extensions import with_weak_group
 
-    why_not = weak_group_evidence(params, recordings, deepest)
-    if why_not or deepest is None:
+    stopped, why_not = weak_group_evidence(params, recordings, deepest)
+    if stopped is None or deepest is None:
         return params, f"no weak series group inferred ({why_not})"
-    inference = inferred_weak_fraction(params, deepest)
+    inference = inferred_weak_fraction(params, stopped, deepest)
     return with_weak_group(params, inference.fraction), inference.describe()
 
 

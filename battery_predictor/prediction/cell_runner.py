@@ -13,9 +13,10 @@ weak group, as in the fast simulator: a second model, built for one cell of the 
 (electrode height scaled by the weak fraction,
 :func:`~battery_predictor.simulation.extensions.weak_group_params`), is stepped with the
 same segments and inputs; the pack voltage is ``(series - 1) * V_normal + V_weak - I_pack * R_eq``
-and the run ends when either group reaches its lower cut-off. Both groups start from the same
-SOC (same stoichiometries; the weak group only holds less charge), so the pack's usable capacity
-and its SOC are those of the group that empties first.
+and the run ends when either group reaches its lower cut-off. The groups were full together
+(:func:`~battery_predictor.simulation.extensions.group_socs`): a run from an SOC starts the weak
+group at that SOC and the normal groups higher, as the same charge drawn from full leaves them. The
+pack's usable capacity and its SOC are those of the group that empties first.
 
 With the PyBaMM option ``{"thermal": "lumped"}`` the cells self-heat from the run's (ambient)
 temperature, a continued run carries their temperature in its solution, and the series
@@ -37,6 +38,7 @@ from battery_predictor.simulation.base import SegmentRun
 from battery_predictor.simulation.cell_setup import build_model, model_options, prepared_parameter_values, quiet_pybamm
 from battery_predictor.simulation.extensions import (
     current_offset_a,
+    group_socs,
     series_resistance_factor,
     weak_group_fraction,
     weak_group_params,
@@ -209,8 +211,8 @@ class PackRunner:
     def run(self, start: float | RunState, segments: Sequence[tuple[float, float]], temperature_k: float) -> SegmentRun:
         """Run ``segments`` = [(duration_s, pack_current_a), ...] at ``temperature_k``.
 
-        ``start`` is a SOC (uniform, relaxed particles; with ``cell_imbalance`` both groups at
-        that SOC) or a :class:`RunState` to continue from. Stops early when a cell reaches its
+        ``start`` is a SOC (uniform, relaxed particles; with ``cell_imbalance`` each group at its
+        SOC, :func:`~battery_predictor.simulation.extensions.group_socs`) or a :class:`RunState` to continue from. Stops early when a cell reaches its
         lower cut-off (with ``cell_imbalance``: a cell of either group).
         """
         import pybamm
@@ -219,6 +221,7 @@ class PackRunner:
             raise SimulationError(f"temperature {temperature_k} K is outside 200..400 K")
         weak_sim = self._weak_sim
         base, sol, sol_w, soc_start, charge0 = self._start(start, temperature_k)
+        base_w = self._weak_start(start, base)
         r_factor = float(series_resistance_factor(self.params, temperature_k))
         thermal = model_options(self.params).get("thermal", "isothermal") == "lumped"
         times, volts, amps, ends = [], [], [], []
@@ -238,7 +241,8 @@ class PackRunner:
                     t_cell = np.asarray(new[_T_CELL].entries, dtype=float).ravel() if thermal else None
                     stopped = _stopped_early(new, t_seg, duration_s)
                     if weak_sim is not None:
-                        new_w, t_w, v_w = _step(weak_sim, sol_w, duration_s, inputs, t_interp)
+                        inputs_w = {**base_w, _CURRENT: inputs[_CURRENT]}
+                        new_w, t_w, v_w = _step(weak_sim, sol_w, duration_s, inputs_w, t_interp)
                         stopped = stopped or _stopped_early(new_w, t_w, duration_s)
                 except (pybamm.SolverError, ValueError, ZeroDivisionError, RuntimeError) as exc:
                     self._sim._solution = None
@@ -252,7 +256,7 @@ class PackRunner:
                     v_pack = self.params.series * v_cell
                 else:  # extension cell_imbalance: the group that reached its cut-off first ends the segment
                     t_seg, v_pack, t_cell, new, new_w = self._with_weak_group(
-                        (t_seg, v_cell, t_cell, sol, new), (t_w, v_w, sol_w, new_w), inputs)
+                        (t_seg, v_cell, t_cell, sol, new), (t_w, v_w, sol_w, new_w), (inputs, inputs_w))
                 times.append(t0 + t_seg)
                 # a lumped thermal cell: the series resistance's Arrhenius factor at the cell temperature
                 factor = r_factor if t_cell is None else series_resistance_factor(self.params, t_cell)
@@ -292,22 +296,35 @@ class PackRunner:
         lo, hi = self.soc_bounds
         if not np.isfinite(soc) or not (lo - 1e-9 <= soc <= hi + 1e-9):
             raise SimulationError(f"SOC must be within {lo:.3f}..{hi:.3f} for this model, got {soc}")
-        c_n0, c_p0 = self.concentrations(soc)
+        normal_soc = group_socs(soc, weak_group_fraction(self.params))[0] if self._weak_sim is not None else soc
+        c_n0, c_p0 = self.concentrations(normal_soc)
         base = {_C_N0: c_n0, _C_P0: c_p0, _T_AMB: float(temperature_k), _T_INIT: float(temperature_k)}
         return base, None, None, soc, 0.0
+
+    def _weak_start(self, start: float | RunState, base: dict[str, float]) -> dict[str, float]:
+        """The weak group's ``[input]`` values for a run whose normal cells start from ``base``.
+
+        From an SOC the normal cells start at the normal groups' SOC and the weak group at its own
+        (:func:`~battery_predictor.simulation.extensions.group_socs`); a continued run carries both groups'
+        states in its solutions and the concentrations are not read.
+        """
+        if self._weak_sim is None or isinstance(start, RunState):
+            return base
+        c_n0, c_p0 = self.concentrations(group_socs(float(start), weak_group_fraction(self.params))[1])
+        return {**base, _C_N0: c_n0, _C_P0: c_p0}
 
     def _with_weak_group(self, normal: tuple[np.ndarray, np.ndarray, np.ndarray | None, pybamm.Solution | None,
                                              pybamm.Solution],
                          weak: tuple[np.ndarray, np.ndarray, pybamm.Solution | None, pybamm.Solution],
-                         inputs: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, pybamm.Solution,
-                                                pybamm.Solution]:
+                         inputs: tuple[dict, dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, pybamm.Solution,
+                                                             pybamm.Solution]:
         """One segment of the pack with a weak group (extension ``cell_imbalance``).
 
         ``normal`` is a normal cell's (times s, voltage V, temperature K or None, solution before, solution
         after) and ``weak`` the weak group's (times, voltage, solution before, after). The group that reached
         its cut-off first ends the segment: the other is interpolated onto its times and re-stepped to its
-        end. Returns (times s, pack voltage V without the series resistance, cell temperature K or None,
-        normal solution, weak solution).
+        end. ``inputs`` are the normal and the weak group's ``[input]`` values. Returns (times s, pack
+        voltage V without the series resistance, cell temperature K or None, normal solution, weak solution).
         """
         t_seg, v_cell, t_cell, sol, new = normal
         t_w, v_w, sol_w, new_w = weak
@@ -317,11 +334,11 @@ class PackRunner:
             if t_cell is not None:
                 t_cell = np.interp(t_w, t_seg, t_cell)
             t_seg = t_w
-            new = self._truncated(self._sim, sol, new, float(t_w[-1]), inputs)
+            new = self._truncated(self._sim, sol, new, float(t_w[-1]), inputs[0])
         else:
             v_w = np.interp(t_seg, t_w, v_w)
             if t_seg[-1] < t_w[-1]:
-                new_w = self._truncated(self._weak_sim, sol_w, new_w, float(t_seg[-1]), inputs)
+                new_w = self._truncated(self._weak_sim, sol_w, new_w, float(t_seg[-1]), inputs[1])
         return t_seg, (self.params.series - 1) * v_cell + v_w, t_cell, new, new_w
 
     @staticmethod

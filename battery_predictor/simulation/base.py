@@ -57,8 +57,13 @@ class SimulationRequest:
     initial_soc : float or None
         Initial state of charge (0..1) of every cell; None uses the params'
         initial concentrations. Mutually exclusive with ``initial_pack_ocv_v``.
+        With a weak series group (``cell_imbalance``) every group starts at it: a pack
+        balanced where the recording starts. The predictor's pack models instead start
+        from an SOC as a discharge from a full, balanced pack leaves the groups
+        (:func:`~battery_predictor.simulation.extensions.group_socs`); both agree from full.
     initial_pack_ocv_v : float or None
-        Initial pack open-circuit voltage in V (divided by the series count).
+        Initial pack open-circuit voltage in V (divided by the series count; every group
+        at it, as for ``initial_soc``).
     output_time_s : numpy.ndarray or None
         Times (s from the load start) to report; None reports every step start and at least every 10 s.
     cell_inputs : dict or None

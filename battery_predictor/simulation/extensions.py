@@ -342,6 +342,26 @@ def weak_group_fraction(params: PackParams) -> float:
     return extension_value(params, WEAK_FRACTION)
 
 
+def group_socs(soc: float, weak_fraction: float) -> tuple[float, float]:
+    """(normal groups' SOC, weak group's SOC) of a pack at ``soc`` whose groups were full together.
+
+    Series groups carry the same current, so once they were all full at once (a charge to full, which
+    the battery management's balancing brings about) each has given the same charge ``q`` since, and a
+    group's SOC is ``1 - q / C_group``. The pack's ``soc`` is the SOC of the group that empties first
+    (the weak group when ``weak_fraction`` < 1). A pack that drew charge since its groups were full is
+    never at one SOC in all groups: the weak group is further down.
+
+    Parameters
+    ----------
+    soc : float
+        The pack's SOC (PyBaMM's linear scale of the limiting group; may lie outside 0..1).
+    weak_fraction : float
+        The weak group's capacity relative to a normal group's (> 0; 1: no weak group).
+    """
+    limiting = min(1.0, weak_fraction)
+    return 1.0 - (1.0 - soc) * limiting, 1.0 - (1.0 - soc) * limiting / weak_fraction
+
+
 def with_weak_group(params: PackParams, fraction: float) -> PackParams:
     """``params`` with one weak series group whose cells hold ``fraction`` (0..1] of the others' capacity.
 

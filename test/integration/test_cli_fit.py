@@ -13,8 +13,8 @@ import yaml
 
 from battery_predictor.io.csv_io import save_csv
 from battery_predictor.params import load_params
-from battery_predictor.prediction.pack_model import pack_model
 from battery_predictor.recording import DeepestState, Recording
+from battery_predictor.simulation import SimulationRequest, StepLoad, get_simulator
 from battery_predictor.simulation.extensions import weak_group_fraction, with_weak_group
 
 REPO = Path(__file__).resolve().parents[2]
@@ -60,10 +60,10 @@ def test_fit_json_and_fitted_params_file_loadable(train_csv, tmp_path):
 @pytest.mark.slow
 def test_fit_of_ranger_data_that_stop_under_load_above_the_threshold_writes_the_weak_group_they_imply(tmp_path):
     params = load_params(REPO / "params" / "ranger_mini.yaml")
-    run = pack_model(with_weak_group(params, 0.8))[0].run(1.0, [(48 * 3600.0, 3.0)], 298.15)
-    t = np.append(np.arange(0.0, float(run.time_s[-1]), 60.0), float(run.time_s[-1]))
+    request = SimulationRequest(load=StepLoad.constant(3.0, 48 * 3600.0), output_time_s=np.arange(0.0, 48 * 3600.0, 60.0))
+    run = get_simulator("engine").simulate(with_weak_group(params, 0.8), request)  # to the weak group's stop
     csv = tmp_path / "weak_day.csv"
-    save_csv(Recording(t, np.interp(t, run.time_s, run.pack_voltage_v), np.full(t.size, 3.0)), csv)
+    save_csv(Recording(run.time_s, run.pack_voltage_v, np.full(run.time_s.size, 3.0)), csv)
     out = tmp_path / "fit.yaml"
     proc = _run("fit", "--params", "params/ranger_mini.yaml", "--data", str(csv), "--method", "tpe", "--trials", "4",
                 "--parameters", "r_c_ohm", "--out", str(out), "--json", "--no-progress")

@@ -310,12 +310,14 @@ def test_extension_reaches_params_file_simulators_and_predictor(tmp_path, temi, 
     run = runner.run(0.7, [(600.0, 5.0)], 298.15)
     assert math.isfinite(float(run.pack_voltage_v[-1]))
     if name == "cell_imbalance":  # the runner's weak group is the fast simulator's two-group pack
+        # from full: the simulator starts every group at its SOC, the runner as a discharge from full leaves them
         edges_s = load_.edges_s()
-        pred = runner.run(0.8, list(zip(np.diff(edges_s), load_.current_a, strict=True)), 298.15)
+        pred = runner.run(1.0, list(zip(np.diff(edges_s), load_.current_a, strict=True)), 298.15)
         assert not pred.reached_cutoff
         mid_s = edges_s[:-1] + 0.5 * np.diff(edges_s)  # inside the segments (off the current steps)
-        fast_mid = FastPackSimulator().simulate(again, replace(req, output_time_s=mid_s))
-        plain_mid = FastPackSimulator().simulate(temi, replace(req, output_time_s=mid_s))
+        full = replace(req, initial_soc=1.0, output_time_s=mid_s)
+        fast_mid = FastPackSimulator().simulate(again, full)
+        plain_mid = FastPackSimulator().simulate(temi, full)
         runner_mid = np.interp(mid_s, pred.time_s, pred.pack_voltage_v)
         assert np.max(np.abs(runner_mid - fast_mid.pack_voltage_v)) < 0.002
         assert np.max(np.abs(runner_mid - plain_mid.pack_voltage_v)) > 0.01  # the weak group matters here

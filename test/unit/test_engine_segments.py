@@ -66,7 +66,7 @@ def test_refuses_an_soc_outside_the_model_and_an_uncovered_extension(ranger_para
 
 def test_weak_group_matches_the_pybamm_pack_model(ranger_params, longest_route_segments):
     from battery_predictor.prediction.cell_runner import PackRunner
-    from battery_predictor.simulation.extensions import weak_group_fraction
+    from battery_predictor.simulation.extensions import group_socs, weak_group_fraction
 
     params = ranger_params.with_values({"Weak series group capacity fraction": 0.8}, extensions=("cell_imbalance",))
     pack = EnginePack(params, weak_fraction=weak_group_fraction(params))
@@ -74,7 +74,10 @@ def test_weak_group_matches_the_pybamm_pack_model(ranger_params, longest_route_s
     engine, pybamm_run = pack.run(0.3, longest_route_segments, 298.15), runner.run(0.3, longest_route_segments, 298.15)
     np.testing.assert_allclose(engine.pack_voltage_v, pybamm_run.pack_voltage_v, rtol=0, atol=PACK_TOLERANCE_V)
     assert pack.capacity_ah == pytest.approx(runner.capacity_ah, rel=1e-6)
-    plain = EnginePack(ranger_params).run(0.3, longest_route_segments, 298.15)
+    # the same charge drawn from full leaves the normal cells at a higher SOC than the weak group's 0.3
+    normal_soc = group_socs(0.3, 0.8)[0]
+    assert normal_soc == pytest.approx(0.44)
+    plain = EnginePack(ranger_params).run(normal_soc, longest_route_segments, 298.15)
     assert engine.pack_voltage_v[-1] < plain.pack_voltage_v[-1] - 0.003  # the weak group sags more
     low = pack.run(0.12, [(600.0, 20.0)] * 4, 298.15)
     low_pybamm = runner.run(0.12, [(600.0, 20.0)] * 4, 298.15)

@@ -8,8 +8,9 @@ previous run ended in, and reports the pack voltage at samples inside every segm
 segment's end sampled under the segment's own current) until the cell's lower cut-off.
 
 A weak series group (extension ``cell_imbalance``) is a second cell whose electrode height is the
-weak fraction of the normal one's (a parameter set of the same extraction, no rebuild); both start
-at the same SOC, the pack voltage is ``(series - 1) V_normal + V_weak - I R_eq`` and the run ends
+weak fraction of the normal one's (a parameter set of the same extraction, no rebuild). The groups
+were full together: from an SOC (the weak group's) the normal cells start higher
+(:func:`~battery_predictor.simulation.extensions.group_socs`); the pack voltage is ``(series - 1) V_normal + V_weak - I R_eq`` and the run ends
 when either cell reaches the cut-off.
 
 Params with the PyBaMM option ``{"thermal": "lumped"}`` run lumped thermal cells
@@ -48,6 +49,7 @@ from battery_predictor.simulation.engine.run import (
 from battery_predictor.simulation.engine.simulator import CELL_MODEL_EXTENSIONS, DIFFUSIVITY_KEYS
 from battery_predictor.simulation.engine.state import StoichiometryWindow
 from battery_predictor.simulation.engine.thermal import DiffusivityTemperature, diffusivity_temperature
+from battery_predictor.simulation.extensions import group_socs
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 if TYPE_CHECKING:
@@ -199,6 +201,13 @@ class EnginePack:
         x = w.x_0 + soc * (w.x_100 - w.x_0)
         return x * w.c_max_mol_m3[0], float(w.y_of(x)) * w.c_max_mol_m3[1]
 
+    def group_concentrations(self, soc: float) -> list[tuple[float, float]]:
+        """Uniform (c_n, c_p) in mol/m3 of each group at the pack's ``soc``: the normal cells', then the weak
+        group's (:func:`~battery_predictor.simulation.extensions.group_socs`: the groups were full together)."""
+        if self._heights.size == 1:
+            return [self.concentrations(soc)]
+        return [self.concentrations(group_soc) for group_soc in group_socs(soc, self.weak_fraction)]
+
     def soc_of(self, state: EngineState) -> float:
         """SOC of a carried state: start SOC minus the charge drawn over the capacity."""
         return state.soc_start - state.charge_ah / self.capacity_ah
@@ -212,8 +221,8 @@ class EnginePack:
         """``start`` with its cells at ``cell_temperature_k`` (K) instead of the ambient or a carried temperature.
 
         Lumped thermal cells only (isothermal cells return ``start`` unchanged, their temperature is the
-        run's). An SOC becomes the state a run from that SOC starts in (uniform particles, every group at
-        the SOC), so a run from it equals the run from the SOC but for the starting temperature.
+        run's). An SOC becomes the state a run from that SOC starts in (uniform particles, each group at
+        its SOC, :meth:`group_concentrations`), so a run from it equals the run from the SOC but for the starting temperature.
 
         Raises
         ------
@@ -227,10 +236,9 @@ class EnginePack:
         temperatures = np.full(self._heights.size, float(cell_temperature_k))
         if isinstance(start, EngineState):
             return replace(start, cell_temperature_k=temperatures)
-        y_n, y_p = self.model.initial_state(*self.concentrations(float(start)))
-        weak = (y_n.copy(), y_p.copy()) if self._heights.size > 1 else None
-        return EngineState(particles=(y_n, y_p), soc_start=float(start), charge_ah=0.0, weak_particles=weak,
-                           cell_temperature_k=temperatures)
+        normal, *weak = (self.model.initial_state(*c) for c in self.group_concentrations(float(start)))
+        return EngineState(particles=normal, soc_start=float(start), charge_ah=0.0,
+                           weak_particles=weak[0] if weak else None, cell_temperature_k=temperatures)
 
     # ------------------------------------------------------------------- runs
     def run(self, start: float | EngineState, segments: npt.ArrayLike, temperature_k: float) -> SegmentRun:
@@ -294,7 +302,7 @@ class EnginePack:
                 weak = start.weak_particles
                 particles = (np.vstack([particles[0], weak[0]]), np.vstack([particles[1], weak[1]]))
             return run_cells(self.model, self.modal, duration_s, cell_a, initial_state=particles, **common)
-        c_n, c_p = self.concentrations(float(start))
+        c_n, c_p = (np.array(c) for c in zip(*self.group_concentrations(float(start)), strict=True))
         return run_cells(self.model, self.modal, duration_s, cell_a, c_n0_mol_m3=c_n, c_p0_mol_m3=c_p, **common)
 
     def run_end(self, start: float | EngineState, segments: npt.ArrayLike, temperature_k: float) -> EngineRunEnd:
