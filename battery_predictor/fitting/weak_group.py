@@ -71,7 +71,8 @@ class WeakGroupInference:
         return (f"weak series group inferred: its cells hold {self.fraction:.3f} of the others' capacity{bound}; "
                 f"replaying the fit data, the fitted pack then stops {self.stop_s / 60:.1f} min in, where they "
                 f"stopped under load ({self.end_s / 60:.1f} min, {d.voltage_v:.2f} V at {d.current_a:.2f} A, "
-                "above the route threshold)")
+                "above the route threshold; if that recording was cut short rather than stopped by the pack, fit "
+                "with --no-weak-group-inference)")
 
 
 def stop_time_s(params: PackParams, fraction: float, recording: Recording, simulator: PackSimulator) -> float:

@@ -39,6 +39,7 @@ from battery_predictor.simulation.cell_setup import build_model, model_options, 
 from battery_predictor.simulation.extensions import (
     current_offset_a,
     group_socs,
+    pack_soc_bounds,
     series_resistance_factor,
     weak_group_fraction,
     weak_group_params,
@@ -171,7 +172,7 @@ class PackRunner:
 
     @cached_property
     def soc_bounds(self) -> tuple[float, float]:
-        """Widest SOC range whose stoichiometries stay inside (0, 1) with a 2 % margin.
+        """Widest SOC range whose stoichiometries, in every group, stay inside (0, 1) with a 2 % margin.
 
         SOC here is PyBaMM's linear coordinate between the 0 % and 100 % OCV points
         (``Open-circuit voltage at 0%/100% SOC``); a pack may be used beyond them (e.g. below
@@ -182,7 +183,8 @@ class PackRunner:
         dx, dy = x100 - x0, y0 - y100
         lows = [(margin - x0) / dx if dx > 0 else -0.5, (y0 - (1 - margin)) / dy if dy > 0 else -0.5]
         highs = [((1 - margin) - x0) / dx if dx > 0 else 1.5, (y0 - margin) / dy if dy > 0 else 1.5]
-        return max(-0.5, max(lows)), min(1.5, min(highs))
+        # with a weak group: where every group's SOC (group_socs) stays inside the cell's range
+        return pack_soc_bounds((max(-0.5, max(lows)), min(1.5, min(highs))), self.weak_fraction)
 
     @cached_property
     def capacity_ah(self) -> float:

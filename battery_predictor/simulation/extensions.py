@@ -362,6 +362,20 @@ def group_socs(soc: float, weak_fraction: float) -> tuple[float, float]:
     return 1.0 - (1.0 - soc) * limiting, 1.0 - (1.0 - soc) * limiting / weak_fraction
 
 
+def pack_soc_bounds(cell_bounds: tuple[float, float], weak_fraction: float) -> tuple[float, float]:
+    """The pack SOCs (low, high) whose groups (:func:`group_socs`) all lie within a cell's ``cell_bounds``.
+
+    Each group's SOC is ``1 - (1 - soc) a`` with ``a`` in (0, 1], so it lies within (low, high) for
+    ``soc`` in ``(1 - (1 - low) / a, 1 - (1 - high) / a)``; the pack's range is where every group's is.
+    """
+    low, high = cell_bounds
+    if weak_fraction == 1.0:
+        return low, high
+    limiting = min(1.0, weak_fraction)
+    slopes = (limiting, limiting / weak_fraction)
+    return max(1.0 - (1.0 - low) / a for a in slopes), min(1.0 - (1.0 - high) / a for a in slopes)
+
+
 def with_weak_group(params: PackParams, fraction: float) -> PackParams:
     """``params`` with one weak series group whose cells hold ``fraction`` (0..1] of the others' capacity.
 

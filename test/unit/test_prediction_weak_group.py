@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -39,7 +40,8 @@ def runners(temi, weak_params):
 def test_weak_group_shortens_the_runtime_by_about_its_capacity_fraction(runners):
     plain, weak = runners
     assert weak.capacity_ah == pytest.approx(WEAK_FRACTION * plain.capacity_ah, rel=1e-9)
-    assert weak.soc_bounds == pytest.approx(plain.soc_bounds)  # same stoichiometries, less area
+    # same stoichiometries, less area; the normal groups stand higher, so the pack's top is lower
+    assert weak.soc_bounds == pytest.approx(ext.pack_soc_bounds(plain.soc_bounds, WEAK_FRACTION))
     cal = Calibration(soc=0.9, residual_v=0.0)
     # a pack cut-off below series x the cell cut-off: the first cell at its cut-off ends the run
     kwargs = dict(voltage_v=15.5, current_a=3.0, temperature_k=298.15, average_current_a=3.0,
@@ -145,3 +147,29 @@ def test_a_run_from_an_soc_starts_where_a_discharge_from_full_to_that_soc_ends(w
     assert again.pack_voltage_v[-1] == pytest.approx(drawn.pack_voltage_v[-1], abs=2e-3)
     loaded = (runner.run(soc, [(1800.0, 5.0)], 298.15), runner.run(drawn.final_state, [(1800.0, 5.0)], 298.15))
     assert loaded[0].pack_voltage_v[-1] == pytest.approx(loaded[1].pack_voltage_v[-1], abs=5e-3)
+
+
+def test_the_packs_soc_range_keeps_every_group_inside_the_cells_range():
+    low, high = ext.pack_soc_bounds((-0.4, 0.957), 0.75)
+    assert (low, high) == pytest.approx((-0.4, 1.0 - 0.043 / 0.75))
+    for soc in (low, high):
+        assert all(-0.4 - 1e-12 <= g <= 0.957 + 1e-12 for g in ext.group_socs(soc, 0.75))
+    assert ext.pack_soc_bounds((-0.4, 1.2), 0.75) == pytest.approx((-0.4, 1.2))  # above 1 the weak group binds
+    assert ext.pack_soc_bounds((-0.4, 0.957), 1.0) == (-0.4, 0.957)
+
+
+@pytest.mark.parametrize("backend", ["engine", "pybamm"])
+def test_a_weak_pack_whose_cells_top_out_below_100_percent_calibrates_at_the_top_of_its_range(backend):
+    from battery_predictor.prediction.pack_model import pack_model
+
+    ranger = load_params(PARAMS / "ranger_mini.yaml").with_values({"Open-circuit voltage at 100% SOC [V]": 3.5})
+    cell_top = pack_model(ranger)[0].soc_bounds[1]
+    assert cell_top < 0.96  # the cells' stoichiometry range ends below the 100 % point
+    weak = ext.with_weak_group(ranger, 0.75)
+    runner = pack_model(weak, backend)[0] if backend == "engine" else PackRunner(weak)
+    top = runner.soc_bounds[1]
+    assert top == pytest.approx(1.0 - (1.0 - cell_top) / 0.75)  # the normal groups reach the cells' top there
+    full = runner.run(top, [(60.0, 0.0)], 298.15)
+    cal = calibrate_soc(runner, float(full.pack_voltage_v[-1]) + 0.5, 0.0, 298.15)  # above the model's top
+    assert cal.soc == pytest.approx(top, abs=1e-6)
+    assert math.isfinite(runner.run(cal.soc, [(600.0, 10.0)], 298.15).pack_voltage_v[-1])

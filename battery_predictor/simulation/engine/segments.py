@@ -49,7 +49,7 @@ from battery_predictor.simulation.engine.run import (
 from battery_predictor.simulation.engine.simulator import CELL_MODEL_EXTENSIONS, DIFFUSIVITY_KEYS
 from battery_predictor.simulation.engine.state import StoichiometryWindow
 from battery_predictor.simulation.engine.thermal import DiffusivityTemperature, diffusivity_temperature
-from battery_predictor.simulation.extensions import group_socs
+from battery_predictor.simulation.extensions import group_socs, pack_soc_bounds
 from battery_predictor.simulation.network import equivalent_network_resistance_ohm
 
 if TYPE_CHECKING:
@@ -181,7 +181,13 @@ class EnginePack:
     # ------------------------------------------------------------------ state
     @property
     def soc_bounds(self) -> tuple[float, float]:
-        """Widest SOC range whose stoichiometries stay inside (0, 1) with a 2 % margin."""
+        """Widest SOC range whose stoichiometries, in every group (:meth:`group_concentrations`), stay inside
+        (0, 1) with a 2 % margin."""
+        return pack_soc_bounds(self._cell_soc_bounds, self.weak_fraction)
+
+    @property
+    def _cell_soc_bounds(self) -> tuple[float, float]:
+        """Widest SOC range of a cell whose stoichiometries stay inside (0, 1) with a 2 % margin."""
         w = self.window
         socs = []
         for x in (_SOC_MARGIN, 1.0 - _SOC_MARGIN):
@@ -193,8 +199,8 @@ class EnginePack:
         return max(lows[0], highs[0]), min(lows[1], highs[1])
 
     def concentrations(self, soc: float) -> tuple[float, float]:
-        """Uniform (c_n, c_p) in mol/m3 at ``soc`` (PyBaMM's linear SOC; may lie outside 0..1)."""
-        lo, hi = self.soc_bounds
+        """Uniform (c_n, c_p) in mol/m3 of a cell at ``soc`` (PyBaMM's linear SOC; may lie outside 0..1)."""
+        lo, hi = self._cell_soc_bounds
         if not (np.isfinite(soc) and lo - 1e-9 <= soc <= hi + 1e-9):
             raise SimulationError(f"SOC must be within {lo:.3f}..{hi:.3f} for this model, got {soc}")
         w = self.window
