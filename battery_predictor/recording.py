@@ -322,21 +322,6 @@ def recording_ending_at_deepest(recordings: Sequence[Recording]) -> Recording | 
         if depth[-1] - lowest <= END_AT_MIN_FRACTION * float(f.max() - f.min()):
             return rec
     return None
-    lowest = min(float(f.min()) for f in finite if f.size)
-    for rec, depth, f in zip(recordings, depths, finite, strict=True):
-        if f.size < 2 or not rec.current_a[-1] > 0.0 or not np.isfinite(depth[-1]):
-            continue
-        if depth[-1] - lowest <= END_AT_MIN_FRACTION * float(f.max() - f.min()):
-            return True
-    return False
-    lowest = min(float(f.min()) for f in finite if f.size)
-    for rec, depth, f in zip(recordings, depths, finite, strict=True):
-        if f.size < 2 or not rec.current_a[-1] > 0.0 or not np.isfinite(depth[-1]):
-            continue
-        span = float(f.max() - f.min())
-        if depth[-1] - lowest <= END_AT_MIN_FRACTION * span and not ends_at_cutoff(rec):
-            return True
-    return False
 
 
 #: A sample discharges when its current exceeds this fraction of the recording's largest discharge current, and
