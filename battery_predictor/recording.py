@@ -123,6 +123,9 @@ KNEE_CHARGE_FRACTION = 0.03
 
 #: A current step is a change between consecutive samples of at least this share of the recording's current range.
 STEP_FRACTION_OF_RANGE = 0.1
+#: Metadata key under which a recording trimmed to its discharge keeps how long (s) the recording went on after
+#: it (rests, a recharge; :func:`~battery_predictor.fitting.problem.trim_to_discharge`).
+DROPPED_TAIL_S_KEY = "dropped_tail_s"
 #: Metadata key under which a recording averaged over windows keeps the step resistance of its samples as
 #: measured: ``[Ohm, number of steps]`` (:func:`~battery_predictor.fitting.resample.resample_windows`,
 #: :func:`as_measured_steps`).
@@ -301,9 +304,10 @@ def recording_ending_at_deepest(recordings: Sequence[Recording]) -> Recording | 
 
     Such data stopped under load: the pack (and a robot's logger with it) was switched off there, as
     the battery management does when a cell reaches its cut-off. Data that end at rest, charging or
-    recovered from their deepest state (the robot went to its charger) did not. A recording that ends
-    within :data:`END_AT_MIN_FRACTION` of its depth range above the deepest state counts as ending there
-    (the noise).
+    recovered from their deepest state (the robot went to its charger) did not, nor does a recording
+    trimmed to its discharge whose rests or recharge after it were dropped (:data:`DROPPED_TAIL_S_KEY`).
+    A recording that ends within :data:`END_AT_MIN_FRACTION` of its depth range above the deepest state
+    counts as ending there (the noise).
 
     Parameters
     ----------
@@ -319,6 +323,8 @@ def recording_ending_at_deepest(recordings: Sequence[Recording]) -> Recording | 
     for rec, depth, f in zip(recordings, depths, finite, strict=True):
         if f.size < 2 or not rec.current_a[-1] > 0.0 or not np.isfinite(depth[-1]):
             continue
+        if rec.metadata.get(DROPPED_TAIL_S_KEY, 0.0) > 0.0:
+            continue  # it went on after its discharge
         if depth[-1] - lowest <= END_AT_MIN_FRACTION * float(f.max() - f.min()):
             return rec
     return None

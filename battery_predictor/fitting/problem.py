@@ -12,7 +12,7 @@ from battery_predictor.errors import InputDataError, SimulationError
 from battery_predictor.fitting.cost import r2_mod, rmse_v
 from battery_predictor.fitting.identifiable import FULL_OCV_MARGIN_V, highest_start_ocv_v
 from battery_predictor.params import PackParams
-from battery_predictor.recording import Recording, discharge_threshold_a
+from battery_predictor.recording import DROPPED_TAIL_S_KEY, Recording, discharge_threshold_a
 from battery_predictor.simulation.base import PackSimResult, PackSimulator, SimulationRequest
 from battery_predictor.simulation.extensions import current_offset_a
 from battery_predictor.simulation.load import StepLoad
@@ -37,7 +37,8 @@ def trim_to_discharge(rec: Recording) -> Recording:
     the rests and recharges after it are dropped, since the model is terminated at the cut-off as the
     experiment was. A bursty drive cycle's lowest voltage can come minutes before its end: the 25 degC US06
     of the shared Panasonic data reaches it in a 17 A burst and drives on for 5.4 min (0.21 Ah).
-    A sample discharges or charges as :func:`~battery_predictor.recording.discharge_threshold_a` says.
+    A sample discharges or charges as :func:`~battery_predictor.recording.discharge_threshold_a` says. How long
+    the recording went on after it is kept in its metadata (:data:`~battery_predictor.recording.DROPPED_TAIL_S_KEY`).
     """
     if len(rec.time_s) < 3:
         raise InputDataError(f"{rec.source}: too few samples ({len(rec.time_s)}) to simulate")
@@ -49,7 +50,9 @@ def trim_to_discharge(rec: Recording) -> Recording:
     stop = _first_charge_session(t, i < -threshold, i_min)
     discharging = np.nonzero(i[i_min:stop] > threshold)[0]
     last = i_min + int(discharging[-1]) if discharging.size else i_min
-    return rec.slice_time(rec.time_s[0], rec.time_s[last])
+    trimmed = rec.slice_time(rec.time_s[0], rec.time_s[last])
+    trimmed.metadata[DROPPED_TAIL_S_KEY] = float(t[-1] - t[last]) + float(rec.metadata.get(DROPPED_TAIL_S_KEY, 0.0))
+    return trimmed
 
 
 def _first_charge_session(time_s: np.ndarray, charging: np.ndarray, start: int) -> int:

@@ -114,3 +114,19 @@ def test_no_group_is_inferred_without_a_threshold_with_one_modelled_or_when_the_
                                                                                                         reason):
     rec = plateau_recording(0.0)
     assert weak_group_evidence(change(ranger()), [rec], deepest_state([rec], T_K)) == (None, reason)
+
+
+def test_fit_data_trimmed_before_their_recharge_did_not_stop_where_they_end():
+    from battery_predictor.fitting.problem import trim_to_discharge
+
+    day = plateau_recording(0.0)
+    t = np.concatenate([day.time_s, day.time_s[-1] + np.arange(60.0, 1260.0, 60.0)])
+    v = np.concatenate([day.voltage_v, np.full(20, 50.0)])
+    i = np.concatenate([day.current_a, np.full(20, -5.0)])
+    trimmed = trim_to_discharge(Recording(t, v, i))
+    assert trimmed.time_s[-1] == day.time_s[-1]  # the fit sees the discharge only
+    assert recording_ending_at_deepest([trimmed]) is None  # ... which did not end there
+    assert recording_ending_at_deepest([trim_to_discharge(day)]) is not None
+    params = ranger()
+    assert weak_group_evidence(params, [trimmed], deepest_state([trimmed], T_K)) == (
+        None, "the fit data do not end at their deepest state under load")
