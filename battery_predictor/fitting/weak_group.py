@@ -149,7 +149,7 @@ def weak_group_evidence(params: PackParams, recordings: Sequence[Recording],
     if "cell_imbalance" in params.extensions:
         return None, "the params model a weak group already"
     if deepest is None:
-        return None, "no deepest state"
+        return None, "no deepest state kept: the fit data reach below the pack's voltage window"
     stopped = recording_ending_at_deepest(recordings)
     if stopped is None:
         return None, "the fit data do not end at their deepest state under load"

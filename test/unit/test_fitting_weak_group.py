@@ -130,3 +130,10 @@ def test_fit_data_trimmed_before_their_recharge_did_not_stop_where_they_end():
     params = ranger()
     assert weak_group_evidence(params, [trimmed], deepest_state([trimmed], T_K)) == (
         None, "the fit data do not end at their deepest state under load")
+
+
+def test_fit_data_below_the_packs_voltage_window_keep_no_state_and_infer_no_group():
+    params = ranger()
+    fitted, line = with_inferred_weak_group(params, [plateau_recording(0.0)], None)
+    assert fitted is params
+    assert line == "no weak series group inferred (no deepest state kept: the fit data reach below the pack's voltage window)"
