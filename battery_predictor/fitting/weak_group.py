@@ -30,7 +30,7 @@ from battery_predictor.params import PackParams
 from battery_predictor.prediction.pack_model import pack_model
 from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v
 from battery_predictor.recording import DeepestState, Recording, recording_ending_at_deepest
-from battery_predictor.simulation import PackSimulator, get_simulator
+from battery_predictor.simulation import PackSimulator, SimulationRequest, get_simulator
 from battery_predictor.simulation.extensions import with_weak_group
 
 #: Range of the capacity fraction the bisection searches (a group holding less than 30 % is a fault, not a
@@ -84,7 +84,12 @@ def stop_time_s(params: PackParams, fraction: float, recording: Recording, simul
     SimulationError
         When the model cannot run the recording.
     """
-    result = simulator.simulate(with_weak_group(params, fraction), request_for_recording(params, recording))
+    return _stop_s(params, fraction, request_for_recording(params, recording), simulator)
+
+
+def _stop_s(params: PackParams, fraction: float, request: SimulationRequest, simulator: PackSimulator) -> float:
+    """:func:`stop_time_s` of a recording's request (the same for every fraction: built once per bisection)."""
+    result = simulator.simulate(with_weak_group(params, fraction), request)
     return float(result.end_time_s) if result.reached_cutoff else math.inf
 
 
@@ -110,15 +115,16 @@ def inferred_weak_fraction(params: PackParams, recording: Recording, deepest: De
     """
     simulator = simulator or get_simulator("engine")
     end_s = float(recording.relative_time_s[-1])
+    request = request_for_recording(params, recording)
     lo, hi = FRACTION_BOUNDS
     for _ in range(BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        if stop_time_s(params, mid, recording, simulator) < end_s:
+        if _stop_s(params, mid, request, simulator) < end_s:
             lo = mid  # stops before the data did: the weak group holds more
         else:
             hi = mid
     # the lower end of the last interval: the model stops at or just before the data's end (the safe side)
-    return WeakGroupInference(lo, deepest, end_s, stop_time_s(params, lo, recording, simulator),
+    return WeakGroupInference(lo, deepest, end_s, _stop_s(params, lo, request, simulator),
                               at_bound=lo == FRACTION_BOUNDS[0])
 
 
