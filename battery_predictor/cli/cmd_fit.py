@@ -21,12 +21,11 @@ from battery_predictor.cli.common import (
     check_output_file,
     check_plot_file,
     engine_fallback,
-    inferred_group_of,
+    fit_data_limits_of,
     print_deepest_state,
     print_json,
     progress_wanted,
     weak_group_json,
-    with_deepest_state,
 )
 from battery_predictor.fitting.identification import DEFAULT_EVALUATIONS
 from battery_predictor.simulation import SIMULATORS
@@ -136,10 +135,10 @@ def _run_tpe(args: argparse.Namespace) -> int:
     best = problem.evaluate(result.best_values)
     report = raw_identifiability(problem, space, result.best_values)
     thermal = "lumped" if is_lumped_thermal(params) else "isothermal"
-    fitted, deepest = with_deepest_state(
-        params.with_values(result.best_values, provenance=_provenance(args, recs, best, result, report, thermal),
-                           fit=params.fit), recs)
-    fitted, weak_line = inferred_group_of(args, fitted, recs, deepest)
+    limits = fit_data_limits_of(
+        args, params.with_values(result.best_values, provenance=_provenance(args, recs, best, result, report, thermal),
+                                 fit=params.fit), recs)
+    fitted, deepest, weak_line = limits.params, limits.deepest, limits.weak_group_line
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}")

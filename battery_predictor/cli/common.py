@@ -9,19 +9,18 @@ import os
 import shutil
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from battery_predictor.errors import InputDataError
 from battery_predictor.params import PackParams
-from battery_predictor.params_checks import pack_voltage_window_v
-from battery_predictor.recording import DeepestState, Recording, deepest_state
+from battery_predictor.recording import DeepestState, Recording
 
 if TYPE_CHECKING:
     import argparse
     from contextlib import AbstractContextManager
 
+    from battery_predictor.fitting.data_limits import FitDataLimits
     from battery_predictor.replay.stream import ReplayStream
     from battery_predictor.simulation.base import PackSimResult
 
@@ -114,56 +113,15 @@ def prepared_data(args: argparse.Namespace, params: PackParams, *, command: str)
     return recs
 
 
-def with_deepest_state(params: PackParams, recordings: Sequence[Recording]) -> tuple[PackParams, DeepestState | None]:
-    """``params`` keeping the fit data's deepest state in ``thresholds``, and that state (None: none kept).
+def fit_data_limits_of(args: argparse.Namespace, fitted: PackParams,
+                       recordings: Sequence[Recording]) -> FitDataLimits:
+    """The fitted params with the fit data's deepest state and weak group
+    (:func:`~battery_predictor.fitting.data_limits.with_fit_data_limits`; ``--no-weak-group-inference`` skips
+    the group)."""
+    from battery_predictor.fitting.data_limits import with_fit_data_limits
 
-    The route check does not let a route draw the pack below it when it lies above the route threshold
-    (:func:`~battery_predictor.prediction.safety.charge_floor`). A state outside the pack's voltage
-    window is not kept (it is below any threshold).
-    """
-    deepest = deepest_state(recordings, params.ambient_temperature_k)
-    if deepest is None:
-        return params, None
-    low, high = pack_voltage_window_v(params)
-    if not low <= deepest.voltage_v <= high:
-        return params, None
-    return replace(params, thresholds={**params.thresholds, **deepest.as_thresholds()}), deepest
-
-
-def with_inferred_weak_group(params: PackParams, recordings: Sequence[Recording],
-                             deepest: DeepestState | None) -> tuple[PackParams, str]:
-    """``params`` with the weak series group the fit data's stop implies, and a line saying what was done.
-
-    See :mod:`battery_predictor.fitting.weak_group`: only data that stop under load above the
-    route threshold call for one; otherwise ``params`` come back unchanged with the reason.
-
-    Raises
-    ------
-    SimulationError
-        When the model cannot run the recordings the inference needs.
-    """
-    from battery_predictor.fitting.weak_group import inferred_weak_fraction, weak_group_evidence
-    from battery_predictor.simulation.extensions import with_weak_group
-
-    stopped, why_not = weak_group_evidence(params, recordings, deepest)
-    if stopped is None or deepest is None:
-        return params, f"no weak series group inferred ({why_not})"
-    inference = inferred_weak_fraction(params, stopped, deepest)
-    return with_weak_group(params, inference.fraction), inference.describe()
-
-
-def inferred_group_of(args: argparse.Namespace, params: PackParams, recordings: Sequence[Recording],
-                      deepest: DeepestState | None) -> tuple[PackParams, str]:
-    """:func:`with_inferred_weak_group` unless ``--no-weak-group-inference``; a model failure keeps ``params``
-    with the reason (the fit is not lost)."""
-    from battery_predictor.errors import BatteryPredictorError
-
-    if getattr(args, "no_weak_group_inference", False):
-        return params, "no weak series group inferred (--no-weak-group-inference)"
-    try:
-        return with_inferred_weak_group(params, recordings, deepest)
-    except BatteryPredictorError as exc:
-        return params, f"no weak series group inferred (the model failed: {exc})"
+    return with_fit_data_limits(fitted, recordings,
+                                infer_weak_group=not getattr(args, "no_weak_group_inference", False))
 
 
 def weak_group_json(params: PackParams, line: str) -> dict[str, Any]:
@@ -175,7 +133,7 @@ def weak_group_json(params: PackParams, line: str) -> dict[str, Any]:
 
 
 def print_deepest_state(deepest: DeepestState | None) -> None:
-    """Say which state of the fit data the fitted params keep as their deepest (see :func:`with_deepest_state`)."""
+    """Say which state of the fit data the fitted params keep as their deepest (see :func:`~battery_predictor.fitting.data_limits.with_deepest_state`)."""
     if deepest is not None:
         print(f"deepest state of the fit data: {deepest.voltage_v:.3f} V at {deepest.current_a:.2f} A "
               f"({deepest.temperature_k - 273.15:.1f} degC); routes are not accepted below it when it lies "

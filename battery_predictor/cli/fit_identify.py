@@ -14,12 +14,11 @@ from battery_predictor.cli.common import (
     check_output_file,
     check_plot_file,
     engine_fallback,
-    inferred_group_of,
+    fit_data_limits_of,
     prepared_data,
     print_deepest_state,
     print_json,
     weak_group_json,
-    with_deepest_state,
 )
 from battery_predictor.errors import InputDataError
 from battery_predictor.ocp import ocp_origin
@@ -91,9 +90,9 @@ def run_identify(args: argparse.Namespace) -> int:
     states = {str(r.source): result.coordinates[c.name] for r, c in zip(recs, space[-len(recs):], strict=True)}
     provenance = _provenance(args, params, recs, best, result, report, states, thermal, problem.fits_weakest_group)
     provenance.update({"structure": chosen.label, "structures": structures})
-    fitted, deepest = with_deepest_state(params.with_values(best.values[0], provenance=provenance, fit=params.fit),
-                                         recs)
-    fitted, weak_line = inferred_group_of(args, fitted, recs, deepest)
+    limits = fit_data_limits_of(args, params.with_values(best.values[0], provenance=provenance, fit=params.fit),
+                                recs)
+    fitted, deepest, weak_line = limits.params, limits.deepest, limits.weak_group_line
     fitted.to_yaml(out)
     plot_path = Path(args.plot) if args.plot else out.with_suffix(".png")
     plot_voltage_fit(recs, best.results, plot_path, title=f"{params.name} fit: R2_mod = {best.r2_mod:.4f}",

@@ -26,6 +26,7 @@ from battery_predictor.evaluation.paper_eval import (
     score_fit,
     table2,
 )
+from battery_predictor.fitting.data_limits import with_fit_data_limits
 from battery_predictor.fitting.problem import trim_to_discharge
 from battery_predictor.io.loader import load_recording
 from battery_predictor.io.paths import portable_paths
@@ -185,7 +186,11 @@ def _routes_part(ev: PaperEvaluation, summary: dict, figures: dict, log: Callabl
         ranger, _, _ = fit_pack(ranger, [step], trials=ev.trials, seed=ev.seed, screen_first=False,
                                 storage=ev.storage, workers=ev.workers)
         score, res = score_fit(ranger, step)
-        summary["stepwise"] = {"r2_mod": score}
+        limits = with_fit_data_limits(ranger, [step])  # as `fit` keeps them: the deepest state, the weak group
+        ranger = limits.params
+        log(f"  {limits.weak_group_line}")
+        summary["stepwise"] = {"r2_mod": score, "weak_group": limits.weak_group_line,
+                               "fit_data_deepest_state": None if limits.deepest is None else limits.deepest.as_thresholds()}
         figures["Fig. 7 kind: stepwise experiment"] = report.fig_stepwise(step, res, score,
                                                                           ev.out / "fig7_stepwise.png")
         ranger = dataclasses.replace(ranger, source=str(ev.out / "ranger_fit_stepwise.yaml"))

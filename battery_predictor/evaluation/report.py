@@ -126,6 +126,8 @@ def write_markdown(out_dir: Path, summary: dict, figures: Mapping[str, Path | No
     if "stepwise" in summary:
         lines += ["## Luggage robot: stepwise experiment fit (5.2.3)", "",
                   f"R2_mod {_fmt(summary['stepwise']['r2_mod'], 3)} (paper: {PAPER['ranger_stepwise_r2_mod']}).", ""]
+        if summary["stepwise"].get("weak_group"):
+            lines += [f"Fitted params: {summary['stepwise']['weak_group']}.", ""]
     if "routes" in summary:
         lines += _routes_lines(summary["routes"], summary.get("route_cases"))
     for title, path in figures.items():

@@ -35,6 +35,11 @@ def test_route_evaluation_reports_voltage_errors_and_decisions_against_truth(tmp
     assert summary["paper"]["route_mae_v"] == 0.17
     report = (out / "report.md").read_text()
     assert "0.17" in report and "Decisions" in report
+    # the stepwise fit keeps what `fit` keeps; the bundled experiment reaches below the pack's voltage window
+    assert summary["stepwise"]["fit_data_deepest_state"] is None
+    assert summary["stepwise"]["weak_group"] == ("no weak series group inferred (no deepest state kept: the fit "
+                                                 "data reach below the pack's voltage window)")
+    assert f"Fitted params: {summary['stepwise']['weak_group']}." in report
     for png in ("fig7_stepwise.png", "fig8_routes.png"):
         assert (out / png).stat().st_size > 10_000
     assert json.loads((out / "summary.json").read_text())["routes"] == r

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.cli.common import with_deepest_state
+from battery_predictor.fitting.data_limits import with_deepest_state
 from battery_predictor.params import load_params
 from battery_predictor.prediction.core import PredictorConfig, PredictorCore
 from battery_predictor.profiles.ranger import longest_route

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from battery_predictor.cli.common import with_inferred_weak_group
+from battery_predictor.fitting.data_limits import with_inferred_weak_group
 from battery_predictor.fitting.weak_group import inferred_weak_fraction, stop_time_s, weak_group_evidence
 from battery_predictor.params import load_params
 from battery_predictor.recording import Recording, deepest_state, recording_ending_at_deepest
