@@ -8,11 +8,16 @@ for a parameter the node applies when it changes.
 from __future__ import annotations
 
 import difflib
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from battery_predictor.config import resolve_params_file
 from battery_predictor.errors import ParamsError
 
 
@@ -48,6 +53,57 @@ def declare_bool(node: Node, name: str, default: bool, description: str, *, read
     """Declare a boolean parameter."""
     descriptor = ParameterDescriptor(description=description, read_only=read_only)
     return bool(node.declare_parameter(name, bool(default), descriptor).value)
+
+
+@dataclass(frozen=True)
+class FloatParameter:
+    """A double parameter that fills the config field of the same name (:func:`declare_config_fields`).
+
+    ``default`` None takes the config field's default; with ``zero_means_unset`` a value of 0 becomes NaN
+    ("take it from the params file": ROS parameters cannot default to NaN within a range).
+    """
+
+    name: str
+    description: str
+    low: float
+    high: float
+    default: float | None = None
+    zero_means_unset: bool = False
+
+
+@dataclass(frozen=True)
+class StrParameter:
+    """A string parameter that fills the config field of the same name (:func:`declare_config_fields`).
+
+    ``default`` None takes the config field's default; with ``params_file`` the value is a params file,
+    resolved with :func:`battery_predictor.config.resolve_params_file` (a bundled name or a path).
+    """
+
+    name: str
+    description: str
+    choices: tuple[str, ...] = ()
+    default: str | None = None
+    params_file: bool = False
+
+
+def declare_config_fields(node: Node, specs: Sequence[FloatParameter | StrParameter],
+                          config_type: type) -> dict[str, Any]:
+    """Declare every parameter of ``specs`` on ``node``; returns the config fields (name -> value) they give.
+
+    ``config_type`` is the frozen dataclass the values are for; its field defaults are the parameters'
+    defaults unless a spec gives its own.
+    """
+    fields = config_type.__dataclass_fields__
+    values: dict[str, Any] = {}
+    for spec in specs:
+        default = spec.default if spec.default is not None else fields[spec.name].default
+        if isinstance(spec, FloatParameter):
+            number = declare_float(node, spec.name, float(default), spec.description, spec.low, spec.high)
+            values[spec.name] = math.nan if spec.zero_means_unset and number == 0.0 else number
+        else:
+            text = declare_str(node, spec.name, str(default), spec.description, spec.choices)
+            values[spec.name] = resolve_params_file(text) if spec.params_file else text
+    return values
 
 
 def undeclared_overrides(node: Node) -> list[str]:

@@ -48,7 +48,13 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from battery_predictor.config import resolve_params_file
 from battery_predictor.errors import BatteryPredictorError, ParamsError
-from battery_predictor.nodes._params import declare_bool, declare_float, declare_str, reject_undeclared
+from battery_predictor.nodes._params import (
+    declare_bool,
+    declare_config_fields,
+    declare_float,
+    declare_str,
+    reject_undeclared,
+)
 from battery_predictor.nodes._sync import TimerProbe
 from battery_predictor.nodes.messages import (
     fill_feasible_tasks_response,
@@ -62,25 +68,20 @@ from battery_predictor.nodes.messages import (
     task_policy,
     tasks_from_msgs,
 )
+from battery_predictor.nodes.predictor_parameters import PREDICTOR_PARAMETERS
 from battery_predictor.params_checks import check_node_voltages
 from battery_predictor.prediction.core import (
-    DRIFT_CORRECTIONS,
-    END_EVENTS,
-    LOAD_MODELS,
-    PEAK_SOURCES,
     STATUS_MODEL_FAILED,
     STATUS_STALE_INPUT,
     PredictorConfig,
     PredictorCore,
     RuntimeStatus,
 )
-from battery_predictor.prediction.load_estimate import ESTIMATORS
-from battery_predictor.prediction.pack_model import BACKENDS, FALLBACK_PREFIX
+from battery_predictor.prediction.pack_model import FALLBACK_PREFIX
 from battery_predictor.prediction.planning import RoutePlan
 from battery_predictor.prediction.route import RouteDecision, rejected
 from battery_predictor.prediction.station_services import StationServices, StationServicesConfig
 from battery_predictor.prediction.tasks import TaskPlan, invalid_plan
-from battery_predictor.prediction.temperature import THERMAL_FORECASTS
 
 #: A pack state this much older than the latest one restarts the predictor (time base restarted), s.
 TIME_BACK_RESET_S = 60.0
@@ -88,16 +89,6 @@ TIME_BACK_RESET_S = 60.0
 PACK_STATE_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
 #: QoS of /remaining_runtime and /diagnostics.
 OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def _core_default(name: str) -> float:
-    """The default of a PredictorConfig field (the core's tuning is the parameter's default)."""
-    return float(PredictorConfig.__dataclass_fields__[name].default)
-
-
-def _unset(value: float) -> float:
-    """0 means "take it from the params file" (ROS parameters cannot default to NaN within a range)."""
-    return math.nan if value == 0.0 else value
 
 
 class PredictorNode(Node):
@@ -182,9 +173,6 @@ class PredictorNode(Node):
 
     # ------------------------------------------------------------ parameters
     def _declare_parameters(self) -> tuple[PredictorConfig, dict[str, str], float]:
-        params_file = declare_str(self, "params_file", "",
-                                  "Fitted pack params YAML (output of 'battery-predictor fit'): absolute, relative to "
-                                  "the working directory, or the name of a bundled file such as temi.yaml.")
         topics = {
             "pack_state": declare_str(self, "pack_state_topic", "pack_state",
                                       "Input: clean pack state from battery_monitor."),
@@ -204,110 +192,7 @@ class PredictorNode(Node):
         runtime_period_s = declare_float(self, "runtime_period_s", 10.0,
                                          "Period of the remaining-runtime update and of /remaining_runtime, s "
                                          "(node clock).", 0.01, 86400.0)
-        config = PredictorConfig(
-            params_file=resolve_params_file(params_file),
-            cutoff_voltage_v=_unset(declare_float(
-                self, "cutoff_voltage_v", 0.0,
-                "Pack voltage at which the robot stops (remaining runtime ends), V; 0 = the params file's "
-                "thresholds.runtime_cutoff_voltage_v (else pack.min_voltage_v).", 0.0, 1000.0)),
-            route_min_voltage_v=_unset(declare_float(
-                self, "route_min_voltage_v", 0.0,
-                "No route may end below this pack voltage at the standstill current, V; 0 = the params file's "
-                "thresholds.route_min_voltage_v.", 0.0, 1000.0)),
-            standstill_current_a=_unset(declare_float(
-                self, "standstill_current_a", 0.0,
-                "Current the route threshold applies at, A; 0 = the params file's thresholds.standstill_current_a "
-                "(else 1.70 A).", 0.0, 1000.0)),
-            stale_after_s=declare_float(self, "stale_after_s", 30.0,
-                                        "A pack state older than this (node clock) is stale, s.", 0.01, 86400.0),
-            charge_current_a=declare_float(self, "charge_current_a", _core_default("charge_current_a"),
-                                           "A current below -charge_current_a charges the pack, A.", 0.0, 1000.0),
-            charge_session_s=declare_float(
-                self, "charge_session_s", _core_default("charge_session_s"),
-                "Charging held this long is a charging session and ends the present discharge cycle (its load "
-                "statistics restart), s; shorter charging (regenerative braking, blips) stays in the cycle.",
-                0.0, 86400.0),
-            load_estimator=declare_str(self, "load_estimator", PredictorConfig.load_estimator,
-                                       "Average load of the present cycle: 'cycle' (mean since the cycle began, "
-                                       "the paper's) or 'ewma' (exponentially weighted, load_time_constant_s).",
-                                       ESTIMATORS),
-            load_model=declare_str(self, "load_model", PredictorConfig.load_model,
-                                   "What of the average load stays constant ahead: 'auto' (the cycle's windows "
-                                   "decide; until they can, the params' operating.load_prior_power_fraction, default a "
-                                   "constant power), 'power' (the current rises as the "
-                                   "pack voltage falls, as behind DC-DC converters and drives) or 'current' "
-                                   "(the paper's).", LOAD_MODELS),
-            load_time_constant_s=declare_float(self, "load_time_constant_s", _core_default("load_time_constant_s"),
-                                               "Time constant of the 'ewma' load estimator, s.", 1.0, 86400.0),
-            state_tolerance_v_per_cell=declare_float(
-                self, "state_tolerance_v_per_cell", _core_default("state_tolerance_v_per_cell"),
-                "Largest model-vs-measurement voltage disagreement per series cell before the state is "
-                "recalibrated; a fresh calibration still this far off rejects routes, V.", 0.001, 1.0),
-            jump_tolerance_v_per_cell=declare_float(
-                self, "jump_tolerance_v_per_cell", _core_default("jump_tolerance_v_per_cell"),
-                "A voltage step between two pack states beyond this per series cell (plus twice what the current "
-                "step explains) is a new pack state (battery swap): the history before it is dropped, V.",
-                0.001, 5.0),
-            default_temperature_k=_unset(declare_float(
-                self, "default_temperature_k", 0.0,
-                "Temperature assumed when none is measured, K; 0 = the params file's operating.ambient_temperature_k.",
-                0.0, 500.0)),
-            calibration_window_s=declare_float(
-                self, "calibration_window_s", _core_default("calibration_window_s"),
-                "History the SOC calibration simulates, s (0 = the latest pack state only, as the paper).",
-                0.0, 86400.0),
-            recalibrate_after_s=declare_float(
-                self, "recalibrate_after_s", _core_default("recalibrate_after_s"),
-                "Full SOC calibrations at most this far apart, s; in between the calibrated state is carried "
-                "forward with the measured current.", 0.0, 86400.0),
-            peak_current_quantile=declare_float(
-                self, "peak_current_quantile", _core_default("peak_current_quantile"),
-                "Quantile of the present cycle's 5 s currents taken as its recurring load peak: the runtime ends "
-                "when such a peak pulls the pack to the cut-off (0 = under the average load, as the paper).",
-                0.0, 1.0),
-            peak_source=declare_str(
-                self, "peak_source", PredictorConfig.peak_source,
-                "Which peaks stop the robot: 'window' (5 s window means below the cut-off, as the paper's robots) "
-                "or 'sample' (a single sample below it, e.g. test equipment or a BMS cut-off).", PEAK_SOURCES),
-            peak_duration_s=declare_float(self, "peak_duration_s", _core_default("peak_duration_s"),
-                                          "How long a sample peak lasts in the model, s (peak_source 'sample').",
-                                          0.01, 60.0),
-            decision_risk=declare_float(
-                self, "decision_risk", _core_default("decision_risk"),
-                "Accepted probability that a route (or a task with the walk back to the charger) ends below its "
-                "threshold: accepted only when the voltage the pack stays above with probability 1 - decision_risk "
-                "is at or above it (0.1 = the P10 voltage; 0.5 = the P50, as the paper).", 0.001, 0.5),
-            drift_correction=declare_str(
-                self, "drift_correction", PredictorConfig.drift_correction,
-                "A carried state more than state_tolerance_v_per_cell off the measurement is recalibrated onto "
-                "it ('full') or just inside the tolerance, half of it left on the side it left ('smallest'; "
-                "for flat-OCV cells such as LiFePO4); 'auto' takes 'smallest' where the OCVs within the tolerance "
-                "span more than 0.3 of the capacity (a flat OCV), else 'full'.", DRIFT_CORRECTIONS),
-            end_event=declare_str(
-                self, "end_event", PredictorConfig.end_event,
-                "Where the runtime of a load with peaks ends: where a peak at peak_current_quantile drawn at any moment "
-                "reaches the cut-off ('peak'), or the median end of futures resampled in 10 min blocks from the "
-                "cycle's own windows ('sampled'); 'auto' takes 'sampled' where the cycle's heavy windows (at or above "
-                "their 0.9 quantile) last 15 s or more on average (a robot's usage states), else 'peak' (a drive "
-                "cycle's short spikes).", END_EVENTS),
-            thermal_forecast=declare_str(
-                self, "thermal_forecast", PredictorConfig.thermal_forecast,
-                "The cell temperature ahead of the runtime forecast: 'auto' integrates it from the latest measured "
-                "temperature with the params' lumped thermal cell when they carry one (heat from the load, exchange "
-                "with ambient_temperature_k), else holds it; 'held' always holds the latest measurement.",
-                THERMAL_FORECASTS),
-            ambient_temperature_k=_unset(declare_float(
-                self, "ambient_temperature_k", 0.0,
-                "Ambient temperature of a self-heating forecast, K; 0 = the lowest cell temperature measured "
-                "since the present discharge cycle began.", 0.0, 400.0)),
-            simulator=declare_str(self, "simulator", PredictorConfig.simulator,
-                                  "Pack model: 'auto' (the SPM engine unless the params activate extensions, then "
-                                  "PyBaMM's solver), 'engine' or 'pybamm'.", BACKENDS),
-            route_currents_file=resolve_params_file(declare_str(
-                self, "route_currents_file", "",
-                "Per-(payload, slope) current samples of the luggage robot; empty = the bundled "
-                "ranger_currents.yaml.")),
-        )
+        config = PredictorConfig(**declare_config_fields(self, PREDICTOR_PARAMETERS, PredictorConfig))
         return config, topics, runtime_period_s
 
     def _declare_station_parameters(self, topics: dict[str, str]) -> StationServicesConfig:

@@ -30,6 +30,8 @@ from battery_predictor.nodes._params import undeclared_overrides
 from battery_predictor.nodes.battery_monitor_node import BatteryMonitorNode
 from battery_predictor.nodes.messages import route_section_msgs
 from battery_predictor.nodes.predictor_node import PredictorNode
+from battery_predictor.nodes.predictor_parameters import PREDICTOR_PARAMETERS
+from battery_predictor.prediction.core import PredictorConfig
 from battery_predictor.profiles.ranger import longest_route
 
 pytestmark = pytest.mark.ros
@@ -80,6 +82,19 @@ def test_node_params_file_loads_into_the_nodes(path: Path, ros_context: Context)
     finally:
         monitor.destroy_node()
         predictor.destroy_node()
+
+
+def test_every_field_of_the_predictors_config_is_a_node_parameter_with_the_cores_default(ros_context: Context) -> None:
+    assert [spec.name for spec in PREDICTOR_PARAMETERS] == list(dict.fromkeys(s.name for s in PREDICTOR_PARAMETERS))
+    assert {spec.name for spec in PREDICTOR_PARAMETERS} == set(PredictorConfig.__dataclass_fields__)
+    node = PredictorNode(context=ros_context, parameter_overrides=[Parameter("params_file", value="temi.yaml")])
+    try:
+        defaults = PredictorConfig(params_file=node.config.params_file)
+        for name in PredictorConfig.__dataclass_fields__:  # 0 = "from the params file" is the core's NaN
+            got, want = getattr(node.config, name), getattr(defaults, name)
+            assert got == want or (math.isnan(got) and math.isnan(want)), name
+    finally:
+        node.destroy_node()
 
 
 def test_out_of_range_parameter_is_refused(ros_context: Context) -> None:
