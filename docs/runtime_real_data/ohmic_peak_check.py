@@ -7,7 +7,9 @@ raises the cut-off of the peak-load crossing by ``R_step (T) * (I_peak - I_avg) 
 drop under the peak is smaller: ``R_step`` is the fit data's step resistance (``recording.step_resistance_ohm``)
 scaled by the model's 5 s pulse resistance at the run's temperature over that at the fit data's mean temperature.
 It prints per recording and pooled MAE / bias and the answers off by more than half after 30 % of a discharge
-(docs/runtime_real_data/README.md, "Five more of the source's recordings").
+(docs/runtime_real_data/README.md, "Five more of the source's recordings"). Without ``--ohmic`` it is the peak
+source and quantile alone (``--peak-source sample --quantile 1.0``: "The largest sample as the peak" there; this
+script replaces ``peak_quantile_check.py``, which measured that).
 
 Run from the repository::
 
