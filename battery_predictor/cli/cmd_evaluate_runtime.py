@@ -168,10 +168,19 @@ def _fmt(x: float, spec: str = ".1f") -> str:
     return format(x, spec) if isinstance(x, (int, float)) and math.isfinite(x) else "-"
 
 
-def _line(name: str, f: dict) -> str:
+def _line(name: str, f: dict, summary: dict) -> str:
     return (f"  {name:<20} MAE {_fmt(f['mae_min']):>6} min  MAPE {_fmt(f['mape_pct']):>6} %  "
             f"bias {_fmt(f['bias_min'], '+.1f'):>7} min  worst {_fmt(f['worst_min'], '+.1f'):>7} min  "
-            f"answered {f['answered']}/{f['checkpoints']}")
+            f"answered {f['answered']}/{f['checkpoints']}  off by > {summary['off_by_fraction']:.0%} after "
+            f"{summary['late_after_fraction']:.0%}: {f['off_by_half_after']}/{f['answers_after']}")
+
+
+def _ratio_text(summary: dict) -> str:
+    """The pooled predictor MAE over the best counter's, as a sentence ("" without a counter)."""
+    best = summary["pooled_ratio_to_best_counter"]
+    if best["counter"] is None:
+        return ""
+    return f"predictor MAE / best counter's ({best['counter']}): {best['ratio']:.2f}x"
 
 
 def _interval_line(f: dict) -> str:
@@ -182,12 +191,13 @@ def _interval_line(f: dict) -> str:
 def _print_recording(res: RecordingResult, counters: list[str]) -> None:
     from battery_predictor.evaluation.runtime_eval import summarise
 
-    block = summarise([res], counters)["per_recording"][0]
+    summary = summarise([res], counters)
+    block = summary["per_recording"][0]
     d = res.discharge
     print(f"{Path(res.source).name}: {(d.end_s - d.start_s) / 60:.1f} min discharge (end: {d.ended_by}), "
           f"{_fmt(res.mean_temperature_c)} degC")
     for name in ["predictor", *(f"counter[{c}]" for c in counters)]:
-        print(_line(name, block[name]))
+        print(_line(name, block[name], summary))
     print(_interval_line(block["interval"]))
     invalid = [c for c in res.checkpoints if not c.valid]
     for c in invalid:
@@ -198,8 +208,10 @@ def _print_pooled(summary: dict) -> None:
     print(f"pooled over {len(summary['per_recording'])} recordings (capacities: "
           + ", ".join(f"{k} {v:.3f} Ah" for k, v in summary["capacities_ah"].items()) + "):")
     for name, f in summary["pooled"].items():
-        print(_line(name, f))
+        print(_line(name, f, summary))
     print(_interval_line(summary["pooled_interval"]))
+    if _ratio_text(summary):
+        print(f"  {_ratio_text(summary)}")
     if "calibrated_uncertainty" in summary:
         cal = summary["calibrated_uncertainty"]
         print(f"calibrated runtime spread: sigma {cal['runtime_log_sigma']:.3f} (log) on {cal['checkpoints']} "
@@ -227,24 +239,30 @@ def report_markdown(summary: dict) -> str:
     import sys
 
     names = list(summary["pooled"])
-    head = "| recording | degC | min | " + " | ".join(f"{n} MAE / bias / worst late %" for n in names) + " |"
+    head = ("| recording | degC | min | " + " | ".join(f"{n} MAE / bias / worst late % / off by half" for n in names)
+            + " |")
     lines = ["# Remaining runtime on measured recordings", "",
              f"Made by `battery-predictor {' '.join(shlex.quote(a) for a in sys.argv[1:])}`", "",
              f"Params `{Path(summary['params']).name}`, cut-off {summary['cutoff_v']:.2f} V, peaks from "
              f"{summary['peak_source']}s, constant {summary['load_model']} ahead (load estimator {summary['load_estimator']}), drift correction {summary['drift_correction']}, temperature ahead {summary['thermal_forecast']}, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
              "discharge. Counter capacities: " + ", ".join(f"{k} {v:.3f} Ah" for k, v in summary["capacities_ah"].items())
              + ". MAE / bias in min; worst late % = the largest error relative to the true remaining time after "
-             f"{summary['late_after_fraction']:.0%} of the discharge.", "", head,
+             f"{summary['late_after_fraction']:.0%} of the discharge; off by half = the answers after "
+             f"{summary['late_after_fraction']:.0%} off by more than {summary['off_by_fraction']:.0%} of the true remaining time, "
+             "of those answered.", "", head,
              "|" + "---|" * (3 + len(names))]
 
     def cells(block: dict) -> str:
         return " | ".join(f"{_fmt(block[n]['mae_min'])} / {_fmt(block[n]['bias_min'], '+.1f')} / "
-                          f"{_fmt(block[n]['worst_late_pct'], '.0f')}" for n in names)
+                          f"{_fmt(block[n]['worst_late_pct'], '.0f')} / "
+                          f"{block[n]['off_by_half_after']} of {block[n]['answers_after']}" for n in names)
 
     for r in summary["per_recording"]:
         lines.append(f"| {Path(r['source']).name} ({r['ended_by']}) | {_fmt(r['mean_temperature_c'])} | "
                      f"{_fmt(r['discharge_min'])} | {cells(r)} |")
     lines.append(f"| **pooled** | | | {cells(summary['pooled'])} |")
+    if _ratio_text(summary):
+        lines += ["", f"Pooled, {_ratio_text(summary)}."]
     lines += ["", "P10..P90 of the predictor: how often the true remaining time fell inside (target 80 %), "
               "below P10 and above P90 (10 % each).", "",
               "| recording | inside % | below P10 % | above P90 % | intervals |", "|---|---|---|---|---|"]

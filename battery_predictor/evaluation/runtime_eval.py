@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -252,21 +252,45 @@ def _discharge_of(params: PackParams, win: Windows, cutoff_v: float, end_margin_
     return find_discharge(win, cutoff_v, start_current_a=_start_current_a(params), end_margin_v=margin)
 
 
+#: An answer is "off by half" when its error exceeds this fraction of the true remaining time (issue 9's rule,
+#: counted after ``late_after`` of a discharge).
+OFF_BY_FRACTION = 0.5
+
+
 def error_summary(pairs: Sequence[tuple[float, float]], *, late_fraction_pairs: Sequence[tuple[float, float]] = ()
                   ) -> dict[str, float]:
-    """MAE / MAPE / bias / worst error (min, %) of (predicted_s, true_s) pairs; invalid answers are NaN."""
+    """MAE / MAPE / bias / worst error (min, %) of (predicted_s, true_s) pairs; invalid answers are NaN.
+
+    Of ``late_fraction_pairs`` (the checkpoints after ``late_after`` of a discharge): the largest error relative
+    to the true remaining time (``worst_late_pct``), how many were answered (``answers_after``) and how many of those
+    are off by more than :data:`OFF_BY_FRACTION` of it (``off_by_half_after``).
+    """
     scored = [(p, t) for p, t in pairs if math.isfinite(t) and t > 0]
     answered = [(p, t) for p, t in scored if math.isfinite(p)]
-    out = {"checkpoints": len(scored), "answered": len(answered)}
+    late = [abs(p - t) / t for p, t in late_fraction_pairs if math.isfinite(p) and math.isfinite(t) and t > 0]
+    out = {"checkpoints": len(scored), "answered": len(answered), "answers_after": len(late),
+           "off_by_half_after": sum(r > OFF_BY_FRACTION for r in late)}
     if not answered:
         return {**out, "mae_min": math.nan, "mape_pct": math.nan, "bias_min": math.nan, "worst_min": math.nan,
                 "worst_late_pct": math.nan}
     err = np.array([p - t for p, t in answered]) / 60.0
     rel = np.array([abs(p - t) / t for p, t in answered]) * 100.0
-    late = [abs(p - t) / t * 100.0 for p, t in late_fraction_pairs if math.isfinite(p) and math.isfinite(t) and t > 0]
     return {**out, "mae_min": float(np.mean(np.abs(err))), "mape_pct": float(np.mean(rel)),
             "bias_min": float(np.mean(err)), "worst_min": float(err[np.argmax(np.abs(err))]),
-            "worst_late_pct": float(max(late)) if late else math.nan}
+            "worst_late_pct": 100.0 * float(max(late)) if late else math.nan}
+
+
+def ratio_to_best_counter(block: dict) -> dict[str, Any]:
+    """The predictor's MAE over the best counter's in a ``summarise`` block (issue 9 asks for at most 0.7x).
+
+    Returns ``{"ratio": float, "counter": name}``; NaN and None when no counter has a finite MAE.
+    """
+    counters = {name: f["mae_min"] for name, f in block.items()
+                if name.startswith("counter[") and math.isfinite(f["mae_min"]) and f["mae_min"] > 0}
+    if not counters or not math.isfinite(block["predictor"]["mae_min"]):
+        return {"ratio": math.nan, "counter": None}
+    best = min(counters, key=counters.__getitem__)
+    return {"ratio": block["predictor"]["mae_min"] / counters[best], "counter": best}
 
 
 def interval_coverage(checkpoints: Sequence[CheckpointResult]) -> dict[str, float]:
@@ -333,8 +357,10 @@ def summarise(results: Sequence[RecordingResult], counters: Sequence[str], *, la
                            "mean_temperature_c": r.mean_temperature_c, **block(r.checkpoints),
                            "interval": interval_coverage(r.checkpoints)} for r in results],
         "pooled": block(every),
+        "pooled_ratio_to_best_counter": ratio_to_best_counter(block(every)),
         "pooled_interval": interval_coverage(every),
         "late_after_fraction": late_after,
+        "off_by_fraction": OFF_BY_FRACTION,
     }
 
 

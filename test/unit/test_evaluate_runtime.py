@@ -17,6 +17,7 @@ from battery_predictor.evaluation.runtime_eval import (
     counter_remaining_s,
     error_summary,
     find_discharge,
+    ratio_to_best_counter,
     recording_runtime_truth,
 )
 from battery_predictor.params import load_params
@@ -62,6 +63,22 @@ def test_error_summary_scores_only_answered_checkpoints_with_a_truth():
     assert s["mae_min"] == pytest.approx(1.0) and s["bias_min"] == pytest.approx(-1.0)
 
 
+def test_error_summary_counts_the_answers_after_the_late_fraction_off_by_more_than_half():
+    late = [(1000.0, 600.0), (250.0, 600.0), (900.0, 600.0), (math.nan, 600.0), (400.0, 0.0)]
+    s = error_summary(late, late_fraction_pairs=late)
+    assert (s["answers_after"], s["off_by_half_after"]) == (3, 2)  # 67 % late, 58 % early; 50 % exactly is not over
+    assert s["worst_late_pct"] == pytest.approx(100.0 * 400.0 / 600.0)
+    assert error_summary([(60.0, 60.0)])["answers_after"] == 0
+
+
+def test_the_ratio_to_the_best_counter_divides_by_the_smallest_counter_mae():
+    block = {"predictor": {"mae_min": 6.0}, "counter[nominal]": {"mae_min": 30.0},
+             "counter[measured]": {"mae_min": 20.0}, "counter[given]": {"mae_min": math.nan}}
+    assert ratio_to_best_counter(block) == {"ratio": pytest.approx(0.3), "counter": "counter[measured]"}
+    alone = ratio_to_best_counter({"predictor": {"mae_min": 6.0}})
+    assert alone["counter"] is None and math.isnan(alone["ratio"])
+
+
 def test_checkpoints_parse_ranges_and_lists_and_refuse_nonsense():
     assert parse_checkpoints("0.1:0.9:0.2") == (0.1, 0.3, 0.5, 0.7, 0.9)
     assert parse_checkpoints("0.25,0.5") == (0.25, 0.5)
@@ -103,7 +120,13 @@ def test_cli_scores_the_predictor_and_the_counters_on_a_discharge(model_discharg
     assert pooled["predictor"]["mae_min"] < 0.05 * discharge_min  # its own model and load kind: close to the truth
     assert summary["load_model"] == "current"
     assert (out / "summary.json").is_file() and (out / "runtime.png").stat().st_size > 1000
-    assert "| **pooled** |" in (out / "report.md").read_text()
+    report = (out / "report.md").read_text()
+    assert "| **pooled** |" in report and "off by half" in report
+    assert pooled["predictor"]["answers_after"] == 2  # the checkpoints at 50 and 80 %, after 30 %
+    ratio = summary["pooled_ratio_to_best_counter"]
+    assert ratio["counter"] in {"counter[nominal]", "counter[given]"}
+    assert ratio["ratio"] == pytest.approx(pooled["predictor"]["mae_min"] / pooled[ratio["counter"]]["mae_min"])
+    assert f"{ratio['ratio']:.2f}x" in report
     rows = json.loads((out / "checkpoints.json").read_text())
     assert [r["fraction"] for r in rows] == [0.2, 0.5, 0.8]
 
