@@ -239,14 +239,14 @@ def report_markdown(summary: dict) -> str:
     import sys
 
     names = list(summary["pooled"])
-    head = ("| recording | degC | min | " + " | ".join(f"{n} MAE / bias / worst late % / off by half" for n in names)
+    head = ("| recording | degC | min | " + " | ".join(f"{n} MAE / bias / worst % / off by half" for n in names)
             + " |")
     lines = ["# Remaining runtime on measured recordings", "",
              f"Made by `battery-predictor {' '.join(shlex.quote(a) for a in sys.argv[1:])}`", "",
              f"Params `{Path(summary['params']).name}`, cut-off {summary['cutoff_v']:.2f} V, peaks from "
              f"{summary['peak_source']}s, constant {summary['load_model']} ahead (load estimator {summary['load_estimator']}), drift correction {summary['drift_correction']}, temperature ahead {summary['thermal_forecast']}, checkpoints {', '.join(f'{c:g}' for c in summary['checkpoints'])} of each "
              "discharge. Counter capacities: " + ", ".join(f"{k} {v:.3f} Ah" for k, v in summary["capacities_ah"].items())
-             + ". MAE / bias in min; worst late % = the largest error relative to the true remaining time after "
+             + ". MAE / bias in min; worst % = the largest error, early or late, relative to the true remaining time after "
              f"{summary['late_after_fraction']:.0%} of the discharge; off by half = the answers after "
              f"{summary['late_after_fraction']:.0%} off by more than {summary['off_by_fraction']:.0%} of the true remaining time, "
              "of those answered.", "", head,
