@@ -48,6 +48,8 @@ EXTENSION_NAMES = (
 )
 #: Interconnect resistances of the liionpack netlist (busbar, connection, internal guess, terminal).
 INTERCONNECT_KEYS = ("r_b_ohm", "r_c_ohm", "r_i_ohm", "r_t_ohm")
+#: The current (A) the route threshold applies at when ``thresholds.standstill_current_a`` is not given (paper 5.2).
+DEFAULT_STANDSTILL_CURRENT_A = 1.70
 _TOP_LEVEL = ("name", "description", "pack", "cell", "interconnect", "thresholds", "operating", "fit", "extensions",
               "provenance")
 _PACK_KEYS = {"series": int, "parallel": int, "nominal_voltage_v": float, "nominal_capacity_ah": float,

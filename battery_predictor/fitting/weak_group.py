@@ -26,7 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from battery_predictor.fitting.problem import request_for_recording
-from battery_predictor.params import PackParams
+from battery_predictor.params import DEFAULT_STANDSTILL_CURRENT_A, PackParams
 from battery_predictor.prediction.pack_model import pack_model
 from battery_predictor.prediction.safety import pulse_resistance_ohm, standstill_voltage_v
 from battery_predictor.recording import DeepestState, Recording, recording_ending_at_deepest
@@ -117,15 +117,19 @@ def inferred_weak_fraction(params: PackParams, recording: Recording, deepest: De
     end_s = float(recording.relative_time_s[-1])
     request = request_for_recording(params, recording)
     lo, hi = FRACTION_BOUNDS
+    lo_stop_s = math.nan  # the stop at ``lo`` once ``lo`` has been a midpoint
     for _ in range(BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        if _stop_s(params, mid, request, simulator) < end_s:
-            lo = mid  # stops before the data did: the weak group holds more
+        stop_s = _stop_s(params, mid, request, simulator)
+        if stop_s < end_s:
+            lo, lo_stop_s = mid, stop_s  # stops before the data did: the weak group holds more
         else:
             hi = mid
+    at_bound = lo == FRACTION_BOUNDS[0]
+    if at_bound:
+        lo_stop_s = _stop_s(params, lo, request, simulator)
     # the lower end of the last interval: the model stops at or just before the data's end (the safe side)
-    return WeakGroupInference(lo, deepest, end_s, _stop_s(params, lo, request, simulator),
-                              at_bound=lo == FRACTION_BOUNDS[0])
+    return WeakGroupInference(lo, deepest, end_s, lo_stop_s, at_bound=at_bound)
 
 
 def weak_group_evidence(params: PackParams, recordings: Sequence[Recording],
@@ -159,7 +163,7 @@ def weak_group_evidence(params: PackParams, recordings: Sequence[Recording],
     stopped = recording_ending_at_deepest(recordings)
     if stopped is None:
         return None, "the fit data do not end at their deepest state under load"
-    standstill_a = float(params.thresholds.get("standstill_current_a", 0.0))
+    standstill_a = float(params.thresholds.get("standstill_current_a", DEFAULT_STANDSTILL_CURRENT_A))
     r_ohm = pulse_resistance_ohm(pack_model(params)[0], deepest.temperature_k)
     if not standstill_voltage_v(deepest.voltage_v, deepest.current_a, standstill_a, r_ohm) > threshold_v:
         return None, "the fit data reach the route threshold"

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 
 from battery_predictor.errors import BatteryPredictorError
-from battery_predictor.params import PackParams, load_params
+from battery_predictor.params import DEFAULT_STANDSTILL_CURRENT_A, PackParams, load_params
 from battery_predictor.prediction.calibration import Calibration, calibrate_on_history, history_segments
 from battery_predictor.prediction.load_estimate import LoadEstimate, LoadEstimator, LoadKind, heavy_run_s
 from battery_predictor.prediction.pack_model import PackModel, pack_model
@@ -383,7 +383,8 @@ class PredictorCore:
         self.cutoff_voltage_v = _pick(config.cutoff_voltage_v, th.get("runtime_cutoff_voltage_v"),
                                       self.params.pack_info.get("min_voltage_v") if self.params else None)
         self.route_min_voltage_v = _pick(config.route_min_voltage_v, th.get("route_min_voltage_v"))
-        self.standstill_current_a = _pick(config.standstill_current_a, th.get("standstill_current_a"), 1.70)
+        self.standstill_current_a = _pick(config.standstill_current_a, th.get("standstill_current_a"),
+                                          DEFAULT_STANDSTILL_CURRENT_A)
         self.default_temperature_k = _pick(config.default_temperature_k,
                                            self.params.ambient_temperature_k if self.params else None, 298.15)
         series = self.params.series if self.params else 1
